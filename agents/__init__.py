@@ -1,0 +1,1 @@
+"""The paper's trackers. :mod:`agents.base` holds the tracker interface."""

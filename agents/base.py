@@ -1,0 +1,106 @@
+"""The tracker interface: :class:`Estimate`, the :class:`Tracker` protocol and
+:class:`TrackerBase`, which gives every tracker Stable-Baselines3's ``predict`` contract."""
+
+from __future__ import annotations
+
+import abc
+import copy
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from dgpt_gym.problem import ProblemSpec
+
+__all__ = ["Estimate", "Tracker", "TrackerBase"]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A tracker's answer for one step.
+
+    Attributes:
+        mean: (2,) estimate of the target position p_t, m.
+        var: (2,) latent predictive variance per axis, m^2.
+        ucb: (2,) upper-confidence-bound half-width per axis (Theorems 1-3), or None.
+        prior_next: (mean, var) of the predicted position at step t + 1, where the tracker
+            has one (the hybrid filter's prior, eq. (48)), else None.
+    """
+
+    mean: np.ndarray
+    var: np.ndarray
+    ucb: np.ndarray | None = None
+    prior_next: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """What the evaluation loop and the RL wrappers need of a tracker."""
+
+    name: str
+
+    def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
+        """Forget the last episode; ``spec`` describes the network and measurement model."""
+
+    def update(self, obs: dict) -> Estimate:
+        """Take the observation of step t and return the estimate of p_t."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
+        """Stable-Baselines3's policy contract: returns ``(actions, state)``."""
+
+
+class TrackerBase(abc.ABC):
+    """Shared behaviour of the project's trackers.
+
+    Subclasses implement :meth:`reset` and :meth:`update` and set ``name``. ``predict``
+    follows Stable-Baselines3's policy contract, so
+    ``stable_baselines3.common.evaluation.evaluate_policy(tracker, vec_env)`` runs any
+    tracker: it takes a batch of observations (one per sub-environment), keeps one copy of
+    the tracker per sub-environment, resets a copy when ``episode_start`` is set for it, and
+    returns the batch of position estimates. Call :meth:`reset` with the environment's
+    :class:`ProblemSpec` first (``info["problem_spec"]`` of ``env.reset()``); the copies
+    inherit it.
+    """
+
+    name: str = "tracker"
+    spec_: ProblemSpec | None = None
+
+    @abc.abstractmethod
+    def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
+        """Forget the last episode; keep ``spec`` in ``self.spec_``."""
+
+    @abc.abstractmethod
+    def update(self, obs: dict) -> Estimate:
+        """Take the observation of step t and return the estimate of p_t."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
+        if self.spec_ is None:
+            raise RuntimeError(
+                f"{type(self).__name__}.predict needs the problem: call "
+                "tracker.reset(info['problem_spec']) with the env's reset info first"
+            )
+        batched = np.ndim(obs["measurements"]) == 3
+        batch = obs if batched else {key: np.asarray(value)[None] for key, value in obs.items()}
+        n_envs = len(batch["measurements"])
+        if episode_start is None:
+            episode_start = np.zeros(n_envs, dtype=bool)
+        copies = self.__dict__.setdefault("_predict_copies", [])
+        actions = np.empty((n_envs, 2))
+        for index in range(n_envs):
+            if index >= len(copies):
+                copies.append(self._fresh_copy())
+            elif episode_start[index]:
+                copies[index] = self._fresh_copy()
+            single = {key: np.asarray(value)[index] for key, value in batch.items()}
+            actions[index] = copies[index].update(single).mean
+        return (actions if batched else actions[0]), state
+
+    def _fresh_copy(self) -> TrackerBase:
+        copies = self.__dict__.pop("_predict_copies", None)
+        try:
+            clone = copy.deepcopy(self)
+        finally:
+            if copies is not None:
+                self._predict_copies = copies
+        clone.reset(self.spec_)
+        return clone

@@ -1,0 +1,36 @@
+"""dgpt-gym: distributed Gaussian-process target tracking in wireless sensor networks.
+
+Importing this package registers the environment ``DGPTrack-v0`` with Gymnasium and the
+trackers with :func:`dgpt_gym.registry.make_tracker` (as entry-point strings: nothing from
+``agents`` or ``baselines`` is imported until a tracker is built).
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+import gymnasium
+
+from dgpt_gym.env import DGPTrackEnv
+from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.registry import make_tracker, register_tracker, tracker_ids
+from dgpt_gym.scenarios import SCENARIOS, get_scenario
+
+try:
+    __version__ = version("dgpt-gym")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0+unknown"
+
+__all__ = [
+    "DGPTrackEnv",
+    "ProblemSpec",
+    "SCENARIOS",
+    "get_scenario",
+    "make_tracker",
+    "register_tracker",
+    "tracker_ids",
+    "__version__",
+]
+
+if "DGPTrack-v0" not in gymnasium.registry:
+    gymnasium.register(id="DGPTrack-v0", entry_point="dgpt_gym.env:DGPTrackEnv")
+
+register_tracker("centroid", entry_point="baselines.centroid:GatedCentroidTracker")

@@ -1,0 +1,54 @@
+"""The command-line scripts, run as a user runs them."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_script(name, *args):
+    return subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / name), *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_evaluate_prints_the_nrmse_table():
+    result = run_script(
+        "evaluate.py",
+        "--scenarios",
+        "S1",
+        "S4",
+        "--clutter-rates",
+        "5",
+        "--runs",
+        "2",
+        "--no-progress",
+    )
+    assert result.returncode == 0, result.stderr
+    rows = re.findall(
+        r"^\| centroid \| (S\d) \| 1 \| 5 \| ([\d.]+) \| ([\d.]+) \| 2 \|$",
+        result.stdout,
+        flags=re.M,
+    )
+    assert [row[0] for row in rows] == ["S1", "S4"]
+    assert all(0 < float(value) < 100 for row in rows for value in row[1:])
+
+
+def test_evaluate_rejects_unknown_names_with_the_valid_ones():
+    result = run_script("evaluate.py", "--trackers", "kalman")
+    assert result.returncode == 2
+    assert "tracker must be one of" in result.stderr and "'centroid'" in result.stderr
+    result = run_script("evaluate.py", "--scenarios", "S7")
+    assert result.returncode == 2 and "'S1', 'S2', 'S3', 'S4'" in result.stderr
+
+
+def test_bench_prints_the_cartpole_ratio():
+    result = run_script("bench.py", "--steps", "300", "--repeats", "1")
+    assert result.returncode == 0, result.stderr
+    ratio = re.search(r"ratio DGPTrack / CartPole \(goal <= 3\): ([\d.]+)", result.stdout)
+    assert ratio and float(ratio.group(1)) > 0
