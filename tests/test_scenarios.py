@@ -112,3 +112,12 @@ def test_impossible_scenario_raises_instead_of_looping():
     too_long = dataclasses.replace(CoordinatedTurnScenario(), area=120.0, max_attempts=5)
     with pytest.raises(RuntimeError, match="no trajectory fitted"):
         too_long.sample(np.random.default_rng(0))
+
+
+def test_readme_quotes_the_current_scenario_parameters():
+    from pathlib import Path
+
+    from dgpt_gym.scenarios import scenario_table_markdown
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert scenario_table_markdown() in readme
