@@ -34,3 +34,9 @@ if "DGPTrack-v0" not in gymnasium.registry:
     gymnasium.register(id="DGPTrack-v0", entry_point="dgpt_gym.env:DGPTrackEnv")
 
 register_tracker("centroid", entry_point="baselines.centroid:GatedCentroidTracker")
+for _aggregation in ("rbcm", "gpoe", "bcm", "poe"):
+    for _inputs in ("tgp", "stgp"):
+        _id = f"dgpt-{_aggregation}" + ("" if _inputs == "tgp" else "-stgp")
+        register_tracker(_id, entry_point="agents.dgpt:DGPT", aggregation=_aggregation, inputs=_inputs)
+register_tracker("gp", entry_point="baselines.standard_gp:StandardGP", inputs="tgp")
+register_tracker("gp-stgp", entry_point="baselines.standard_gp:StandardGP", inputs="stgp")
