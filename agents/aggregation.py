@@ -12,6 +12,10 @@ variance never exceeds the prior's), which keeps every aggregate precision posit
   (all experts at the prior).
 
 Experts can be switched off with ``valid`` (..., M) (False for padding).
+
+With a single expert there is nothing to aggregate and every method returns that expert's
+prediction; applied literally, eqs. (11)-(20) would divide its variance by beta (GPoE) or
+mix it with the prior (RBCM).
 """
 
 from __future__ import annotations
@@ -90,6 +94,11 @@ def aggregate(
         precision = np.where(precision > 0, precision, prior_precision)
     aggregate_var = 1.0 / np.maximum(precision, _TINY)
     aggregate_mean = aggregate_var * np.sum(weights * np.where(valid, mean, 0.0), axis=-1)
+    single = valid.sum(axis=-1) == 1
+    if np.any(single):
+        aggregate_mean = np.where(single, np.sum(np.where(valid, mean, 0.0), axis=-1), aggregate_mean)
+        aggregate_var = np.where(single, np.sum(np.where(valid, var, 0.0), axis=-1), aggregate_var)
+        weights = np.where(single[..., None], precision_i, weights)
     return Aggregate(aggregate_mean, aggregate_var, weights)
 
 

@@ -32,30 +32,38 @@ from agents import aggregation as agg
 from agents import gp
 from agents.base import Estimate, TrackerBase
 from agents.gating import gate_measurements
-from agents.window import SlidingWindow, StepRecord
+from agents.window import PRIOR_MEANS, SlidingWindow, StepRecord
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
-__all__ = ["DGPT", "INITIAL_HYPERPARAMETERS", "HYPERPARAMETER_BOUNDS", "INPUTS", "MEANS"]
+__all__ = ["DGPT", "INITIAL_HYPERPARAMETERS", "HYPERPARAMETER_BOUNDS", "FIT_GRADIENT_TOLERANCE", "INPUTS"]
 
 INPUTS = ("tgp", "stgp")
-MEANS = ("window", "zero")
+
+FIT_GRADIENT_TOLERANCE = 1e-2
+"""Projected-gradient tolerance of the online fit, in nats per unit log hyperparameter:
+a step of 0.01 in log space then changes the likelihood by less than 1e-4 nats."""
 
 INITIAL_HYPERPARAMETERS = {
-    "signal_var": 1e4,  # m^2: a displacement of ~100 m over the window
-    "time_lengthscale": 10.0,  # s
+    "signal_var": 400.0,  # m^2: deviations of ~20 m from the window's trend
+    "time_lengthscale": 5.0,  # s
     "space_lengthscale": 200.0,  # m (STGP only)
-    "noise_var": 4.0,  # m^2
+    "noise_var": 1.0,  # m^2
 }
 """Start of the hyperparameter search at the first step of an episode (per axis)."""
 
 HYPERPARAMETER_BOUNDS = {
-    "signal_var": (1.0, 1e8),
-    "time_lengthscale": (0.5, 1e3),
-    "space_lengthscale": (1.0, 1e5),
-    "noise_var": (1e-2, 1e4),
+    "signal_var": (100.0, 1e6),
+    "time_lengthscale": (1.0, 30.0),
+    "space_lengthscale": (1.0, 1e4),
+    "noise_var": (0.1, 1e4),
 }
-"""L-BFGS-B bounds (m^2, s, m): they keep the covariance well conditioned."""
+"""L-BFGS-B bounds (m^2, s, m). They encode what the data of a short window cannot: a
+length scale below the sampling period or far beyond the window is not identifiable, and
+without a floor on the signal variance the likelihood of a straight stretch drives the
+model to "trend plus white noise", whose over-confident predictions then make the gate lock
+onto clutter at the next manoeuvre (measured: DGPT-RBCM mean NRMSE over S1-S4 x clutter
+1, 5 fell from 4.1 % to 3.0 % with these bounds and window 5)."""
 
 
 class DGPT(TrackerBase):
@@ -66,11 +74,14 @@ class DGPT(TrackerBase):
         inputs: ``"tgp"`` (time) or ``"stgp"`` (previous estimate and time).
         window: C, the sliding-window length in steps (>= 2).
         delta: total failure probability of the UCB, in (0, 1); 0.003 is the paper's 99.7 %.
-        mean: ``"window"`` (outputs centred by the mean of the window's summaries, the
-            default) or ``"zero"`` (zero-mean GP on raw coordinates, as in the paper).
+        mean: the GP prior mean over the window (:func:`agents.window.window_prior_mean`):
+            ``"linear"`` (least-squares constant-velocity trend, the default), ``"window"``
+            (the window's mean) or ``"zero"`` (raw coordinates, as in the paper).
         max_iterations: L-BFGS-B iterations per step (warm-started, few are needed).
         anytime_ucb: use Lemma 2's gamma_t (a bound holding at every step at once, the
             terms of Theorem 3) instead of the one-step gamma of Theorems 1-2.
+        gating: weigh each sensor's measurements by eqs. (27)-(28) (the default); False
+            takes their unweighted mean (an ablation).
     """
 
     name = "dgpt"
@@ -82,17 +93,19 @@ class DGPT(TrackerBase):
         inputs: str = "tgp",
         window: int = 10,
         delta: float = 0.003,
-        mean: str = "window",
-        max_iterations: int = 20,
+        mean: str = "linear",
+        max_iterations: int = 5,
         anytime_ucb: bool = False,
+        gating: bool = True,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.inputs = check_choice("inputs", inputs, INPUTS)
         self.window = check_integer("window", window, low=2)
         self.delta = check_real("delta", delta, low=0.0, high=1.0, low_inclusive=False, high_inclusive=False)
-        self.mean = check_choice("mean", mean, MEANS)
+        self.mean = check_choice("mean", mean, PRIOR_MEANS)
         self.max_iterations = check_integer("max_iterations", max_iterations, low=1)
         self.anytime_ucb = bool(anytime_ucb)
+        self.gating = bool(gating)
         self.name = f"{'gp' if self.pooled else 'dgpt-' + self.aggregation}-{self.inputs}"
 
     # -- hyperparameters ------------------------------------------------------------------
@@ -138,7 +151,7 @@ class DGPT(TrackerBase):
         sensors = np.asarray(obs["sensor"])[mask]
         if points.shape[0]:
             self._record(step, points, sensors)
-        data = self.window_.expert_data(step, self._spatial, self.mean == "window", self.pooled)
+        data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
         if data is None:  # nothing seen yet in this episode
             centre = np.full(2, self.spec_.area / 2.0)
             return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
@@ -167,14 +180,21 @@ class DGPT(TrackerBase):
         return mean, var + noise
 
     def _record(self, step: int, points: np.ndarray, sensors: np.ndarray) -> None:
-        mean, var = self._gate_prediction(points, sensors)
+        if self.gating:
+            mean, var = self._gate_prediction(points, sensors)
+        else:  # equal likelihoods: every measurement of a sensor gets the same weight
+            mean, var = points, np.ones_like(points)
         gated = gate_measurements(points, sensors, mean, var)
         previous = self.estimate_ if self.estimate_ is not None else np.median(points, axis=0)
         self.window_.add(StepRecord(step, gated.sensors, gated.summaries, previous))
 
     def _learn(self, data) -> None:
         result = gp.fit_hyperparameters(
-            self.log_params_, data.X, data.z, data.mask, self.bounds(), self.max_iterations
+            self.log_params_,
+            data.training,
+            bounds=self.bounds(),
+            max_iterations=self.max_iterations,
+            gradient_tolerance=FIT_GRADIENT_TOLERANCE,
         )
         self.last_fit_ = result
         self.log_params_ = result.log_params
@@ -186,28 +206,32 @@ class DGPT(TrackerBase):
         time = np.full((2, n_experts, 1, 1), relative_time)
         if not self._spatial:
             return time
-        space = np.broadcast_to((previous - data.offset)[:, None, None, None], time.shape)
+        space = np.broadcast_to((previous - data.intercept)[:, None, None, None], time.shape)
         return np.concatenate([space, time], axis=-1)
 
-    def _aggregate(self, mean: np.ndarray, var: np.ndarray, prior_var: np.ndarray, data):
+    def _aggregate(self, mean: np.ndarray, var: np.ndarray, prior_var: np.ndarray, prior_mean):
         combined = agg.aggregate(self.aggregation, mean, var, prior_var)
-        return combined.mean + data.offset, combined.var
+        return combined.mean + prior_mean, combined.var
 
     def _predict(self, step: int, data) -> Estimate:
         log_params = self.log_params_
         try:
-            fact = gp.factorize(log_params, data.X, data.mask)
+            fact = gp.factorize(log_params, data.training)
         except gp.NumericalError:
             log_params = self.log_params_ = self.initial_log_params()
-            fact = gp.factorize(log_params, data.X, data.mask)
+            fact = gp.factorize(log_params, data.training)
         prior_var = np.exp(log_params[:, 0])
-        previous = self.estimate_ if self.estimate_ is not None else data.offset
+        previous = self.estimate_ if self.estimate_ is not None else data.prior_mean(-1.0)
         x_now = self._test_inputs(data, 0.0, previous)
-        mean_now, var_now = gp.predict(log_params, data.X, data.z, data.mask, x_now, fact)
-        estimate, estimate_var = self._aggregate(mean_now[..., 0], var_now[..., 0], prior_var, data)
+        mean_now, var_now = gp.predict(log_params, data.training, None, None, x_now, fact)
+        estimate, estimate_var = self._aggregate(
+            mean_now[..., 0], var_now[..., 0], prior_var, data.prior_mean(0.0)
+        )
         x_next = self._test_inputs(data, 1.0, estimate)
-        mean_next, var_next = gp.predict(log_params, data.X, data.z, data.mask, x_next, fact)
-        next_mean, next_var = self._aggregate(mean_next[..., 0], var_next[..., 0], prior_var, data)
+        mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
+        next_mean, next_var = self._aggregate(
+            mean_next[..., 0], var_next[..., 0], prior_var, data.prior_mean(1.0)
+        )
 
         ucb = agg.ucb_half_width(
             self.aggregation, var_now[..., 0], prior_var, self.delta,
@@ -220,6 +244,6 @@ class DGPT(TrackerBase):
             self.expert_sensors_ = np.empty(0, dtype=np.int64)
         else:
             self.expert_sensors_ = data.sensors
-            self.expert_next_mean_ = (mean_next[..., 0] + data.offset[:, None]).T
+            self.expert_next_mean_ = (mean_next[..., 0] + data.prior_mean(1.0)[:, None]).T
             self.expert_next_var_ = var_next[..., 0].T
         return Estimate(estimate.copy(), estimate_var, ucb, (next_mean, next_var))

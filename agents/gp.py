@@ -25,6 +25,7 @@ from scipy.linalg import lapack
 
 __all__ = [
     "NumericalError",
+    "TrainingData",
     "Factorization",
     "n_params",
     "unpack",
@@ -74,20 +75,53 @@ def se_kernel(x1: np.ndarray, x2: np.ndarray, log_params: np.ndarray) -> np.ndar
 
 
 @dataclass(frozen=True)
+class TrainingData:
+    """Training inputs and outputs with what does not depend on the hyperparameters
+    precomputed: the per-dimension squared input differences and the mask weights.
+    Build it once (:meth:`build`) and evaluate many hyperparameters on it."""
+
+    X: np.ndarray
+    z: np.ndarray
+    weight: np.ndarray
+    pair_weight: np.ndarray
+    squared_differences: np.ndarray
+    padding_diagonal: np.ndarray
+    identity: np.ndarray
+
+    @classmethod
+    def build(cls, X: np.ndarray, z: np.ndarray, mask: np.ndarray | None = None) -> TrainingData:
+        X = np.asarray(X, dtype=float)
+        if mask is None:
+            mask = np.ones(X.shape[:-1], dtype=bool)
+        weight = np.broadcast_to(np.asarray(mask, dtype=float), X.shape[:-1])
+        diff = X[..., :, None, :] - X[..., None, :, :]
+        identity = np.eye(X.shape[-2])
+        return cls(
+            X=X,
+            z=np.asarray(z, dtype=float) * weight,
+            weight=weight,
+            pair_weight=weight[..., :, None] * weight[..., None, :],
+            squared_differences=diff * diff,
+            padding_diagonal=(1.0 - weight)[..., None] * identity,
+            identity=identity,
+        )
+
+
+@dataclass(frozen=True)
 class Factorization:
     """What the likelihood, its gradient and predictions share for one set of hyperparameters.
 
     ``kernel`` is the masked noise-free covariance K, ``inverse`` the inverse of
     Sigma = K + sigma_n^2 I (unit diagonal on padding), ``log_det`` log|Sigma| per expert,
-    ``scaled`` the per-dimension scaled squared differences, ``jitter`` what was added to the
-    diagonal to make Sigma positive definite (0 normally).
+    ``scaled`` the per-dimension scaled squared differences, ``alpha`` = Sigma^-1 z,
+    ``jitter`` what was added to the diagonal to make Sigma positive definite (0 normally).
     """
 
     kernel: np.ndarray
     inverse: np.ndarray
     log_det: np.ndarray
     scaled: np.ndarray
-    mask: np.ndarray
+    alpha: np.ndarray
     jitter: float
 
 
@@ -111,52 +145,51 @@ def _cholesky_inverse(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 raise np.linalg.LinAlgError("inversion failed")
             inverse[index] = np.tril(lower_inverse) + np.tril(lower_inverse, -1).T
         return inverse.reshape(matrices.shape), log_det.reshape(matrices.shape[:-2])
+    # Small matrices: the Cholesky factor proves positive definiteness and gives the
+    # log-determinant; numpy's stacked inverse is faster than two triangular solves here.
     factor = np.linalg.cholesky(matrices)
-    factor_inverse = np.linalg.inv(factor)
     log_det = 2.0 * np.log(np.diagonal(factor, axis1=-2, axis2=-1)).sum(axis=-1)
-    return np.swapaxes(factor_inverse, -1, -2) @ factor_inverse, log_det
+    return np.linalg.inv(matrices), log_det
 
 
-def factorize(log_params: np.ndarray, X: np.ndarray, mask: np.ndarray | None = None) -> Factorization:
+def _as_data(X, z, mask) -> TrainingData:
+    return X if isinstance(X, TrainingData) else TrainingData.build(X, z, mask)
+
+
+def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
     """Build K and invert Sigma = K + sigma_n^2 I for every expert, with escalating jitter.
 
     If Sigma is not numerically positive definite, jitter of 1e-10, 1e-8, ..., 1e-2 times
     the mean diagonal is added until it is; :class:`NumericalError` if even that fails.
     """
-    X = np.asarray(X, dtype=float)
-    mask = np.ones(X.shape[:-1], dtype=bool) if mask is None else np.broadcast_to(mask, X.shape[:-1])
-    weight = mask.astype(float)
-    signal, lengthscales, noise = unpack(np.asarray(log_params)[..., None, :])
-    scaled = _scaled_squared_differences(X, X, lengthscales)
-    kernel = signal[..., None, None] * np.exp(-0.5 * scaled.sum(axis=-1))
-    kernel *= weight[..., :, None] * weight[..., None, :]
-    diagonal = noise[..., None] * weight + (1.0 - weight)
-    sigma = kernel.copy()
-    index = np.arange(X.shape[-2])
-    sigma[..., index, index] += diagonal
+    params = np.exp(np.asarray(log_params, dtype=float))[..., None, None, None, :]
+    scaled = data.squared_differences / (params[..., 1:-1] * params[..., 1:-1])
+    kernel = params[..., 0] * data.pair_weight * np.exp(-0.5 * scaled.sum(axis=-1))
+    noise_diagonal = params[..., -1] * data.weight[..., None] * data.identity
+    sigma = kernel + noise_diagonal + data.padding_diagonal
+    n = kernel.shape[-1]
+    jitter = 0.0
     try:
         inverse, log_det = _cholesky_inverse(sigma)
-        jitter = 0.0
     except np.linalg.LinAlgError:
         scale = float(np.mean(np.diagonal(sigma, axis1=-2, axis2=-1)))
         for exponent in range(-10, 0, 2):
             jitter = scale * 10.0**exponent
-            jittered = sigma.copy()
-            jittered[..., index, index] += jitter * weight
             try:
-                inverse, log_det = _cholesky_inverse(jittered)
+                inverse, log_det = _cholesky_inverse(sigma + (jitter * data.weight)[..., None] * np.eye(n))
                 break
             except np.linalg.LinAlgError:
                 continue
         else:
             raise NumericalError("covariance matrix is not positive definite even with jitter") from None
-    return Factorization(kernel, inverse, log_det, scaled, weight, jitter)
+    alpha = np.einsum("...ij,...j->...i", inverse, data.z)
+    return Factorization(kernel, inverse, log_det, scaled, alpha, jitter)
 
 
 def log_marginal_likelihood(
     log_params: np.ndarray,
-    X: np.ndarray,
-    z: np.ndarray,
+    X: np.ndarray | TrainingData,
+    z: np.ndarray | None = None,
     mask: np.ndarray | None = None,
     with_gradient: bool = True,
 ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -164,33 +197,31 @@ def log_marginal_likelihood(
     ``-1/2 z^T Sigma^-1 z - 1/2 log|Sigma| - n/2 log 2 pi``, and its gradient with respect to
     the log hyperparameters, ``1/2 tr((alpha alpha^T - Sigma^-1) dSigma/dtheta)``.
 
+    ``X`` may be a prepared :class:`TrainingData` (then ``z`` and ``mask`` are ignored).
     Returns ``(value (*B,), gradient (*B, p) or None)``.
     """
-    fact = factorize(log_params, X, mask)
-    z = np.asarray(z, dtype=float) * fact.mask
-    alpha = np.einsum("...ij,...j->...i", fact.inverse, z)
-    per_expert = -0.5 * np.einsum("...i,...i->...", z, alpha) - 0.5 * fact.log_det
-    per_expert -= 0.5 * LOG_2PI * fact.mask.sum(axis=-1)
-    value = per_expert.sum(axis=-1)
+    data = _as_data(X, z, mask)
+    fact = factorize(log_params, data)
+    alpha = fact.alpha
+    per_expert = -0.5 * np.einsum("...i,...i->...", data.z, alpha) - 0.5 * fact.log_det
+    value = per_expert.sum(axis=-1) - 0.5 * LOG_2PI * data.weight.sum(axis=(-1, -2))
     if not with_gradient:
         return value, None
     inner = alpha[..., :, None] * alpha[..., None, :] - fact.inverse
     weighted = inner * fact.kernel
-    grad_signal = 0.5 * weighted.sum(axis=(-1, -2))
-    grad_lengthscales = 0.5 * np.einsum("...ab,...abd->...d", weighted, fact.scaled)
-    _, _, noise = unpack(np.asarray(log_params)[..., None, :])
+    grad_signal = 0.5 * weighted.sum(axis=(-1, -2, -3))
+    grad_lengthscales = 0.5 * np.einsum("...mab,...mabd->...d", weighted, fact.scaled)
+    noise = np.exp(np.asarray(log_params, dtype=float)[..., -1])
     inner_diagonal = np.diagonal(inner, axis1=-2, axis2=-1)
-    grad_noise = 0.5 * noise * (inner_diagonal * fact.mask).sum(axis=-1)
-    gradient = np.concatenate(
-        [grad_signal[..., None], grad_lengthscales, grad_noise[..., None]], axis=-1
-    ).sum(axis=-2)
+    grad_noise = 0.5 * noise * (inner_diagonal * data.weight).sum(axis=(-1, -2))
+    gradient = np.concatenate([grad_signal[..., None], grad_lengthscales, grad_noise[..., None]], axis=-1)
     return value, gradient
 
 
 def predict(
     log_params: np.ndarray,
-    X: np.ndarray,
-    z: np.ndarray,
+    X: np.ndarray | TrainingData,
+    z: np.ndarray | None,
     mask: np.ndarray | None,
     X_test: np.ndarray,
     factorization: Factorization | None = None,
@@ -201,15 +232,12 @@ def predict(
     ``X_test`` (*B, M, s, d); returns mean and variance (*B, M, s). The variance is clipped
     to ``[1e-12 sigma_f^2, sigma_f^2]`` against round-off.
     """
-    fact = factorize(log_params, X, mask) if factorization is None else factorization
-    z = np.asarray(z, dtype=float) * fact.mask
-    cross = se_kernel(np.asarray(X, dtype=float), np.asarray(X_test, dtype=float), log_params)
-    cross = cross * fact.mask[..., :, None]
-    alpha = np.einsum("...ij,...j->...i", fact.inverse, z)
-    mean = np.einsum("...ns,...n->...s", cross, alpha)
+    data = _as_data(X, z, mask)
+    fact = factorize(log_params, data) if factorization is None else factorization
+    cross = se_kernel(data.X, np.asarray(X_test, dtype=float), log_params) * data.weight[..., :, None]
+    mean = np.einsum("...ns,...n->...s", cross, fact.alpha)
     reduction = np.einsum("...ns,...nm,...ms->...s", cross, fact.inverse, cross)
-    signal, _, _ = unpack(np.asarray(log_params)[..., None, :])
-    prior = signal[..., None]
+    prior = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None]
     variance = np.clip(prior - reduction, 1e-12 * prior, prior)
     return mean, variance
 
@@ -238,57 +266,73 @@ class FitResult:
 
 def fit_hyperparameters(
     log_params: np.ndarray,
-    X: np.ndarray,
-    z: np.ndarray,
+    X: np.ndarray | TrainingData,
+    z: np.ndarray | None = None,
     mask: np.ndarray | None = None,
     bounds: np.ndarray | None = None,
     max_iterations: int = 50,
+    gradient_tolerance: float = 1e-5,
 ) -> FitResult:
     """Maximum-likelihood hyperparameters with L-BFGS-B in log space, warm-started at
     ``log_params`` (*B, p); the batch's independent problems are optimised jointly (their
-    likelihoods add). The result never contains NaN: if the optimisation fails, raises
-    inside, or ends below the start's likelihood, the start is kept (``kept_start``).
+    likelihoods add).
+
+    When the projected gradient at the start is already below ``gradient_tolerance`` (the
+    usual case for a warm start on a window that changed little), the start is returned
+    without calling the optimiser. The result never contains NaN: if the optimisation
+    fails, raises inside, or ends below the start's likelihood, the start is kept
+    (``kept_start``).
     """
     start = np.asarray(log_params, dtype=float)
     d = start.shape[-1] - 2
     bounds = default_bounds(d) if bounds is None else np.asarray(bounds, dtype=float)
     start = np.clip(start, bounds[:, 0], bounds[:, 1])
     shape = start.shape
-    counter = {"evaluations": 0}
+    data = _as_data(X, z, mask)
+    memo: dict[bytes, tuple[float, np.ndarray, np.ndarray]] = {}
+
+    def evaluate(flat: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        key = flat.tobytes()
+        if key not in memo:
+            value, gradient = log_marginal_likelihood(flat.reshape(shape), data)
+            total = -float(np.sum(value))
+            if not np.isfinite(total) or not np.all(np.isfinite(gradient)):
+                raise NumericalError("non-finite likelihood")
+            memo[key] = (total, -gradient.ravel(), value)
+        return memo[key]
 
     def objective(flat: np.ndarray) -> tuple[float, np.ndarray]:
-        counter["evaluations"] += 1
-        value, gradient = log_marginal_likelihood(flat.reshape(shape), X, z, mask)
-        total = -float(np.sum(value))
-        if not np.isfinite(total) or not np.all(np.isfinite(gradient)):
-            raise NumericalError("non-finite likelihood")
-        return total, -gradient.ravel()
+        total, gradient, _ = evaluate(flat)
+        return total, gradient
 
+    flat_bounds = np.tile(bounds, (int(np.prod(shape[:-1])), 1))
     try:
-        start_value = -objective(start.ravel())[0]
+        start_total, start_gradient, start_value = evaluate(start.ravel())
+        blocked = ((start.ravel() <= flat_bounds[:, 0]) & (start_gradient > 0)) | (
+            (start.ravel() >= flat_bounds[:, 1]) & (start_gradient < 0)
+        )
+        if np.max(np.abs(np.where(blocked, 0.0, start_gradient))) <= gradient_tolerance:
+            return FitResult(start, start_value, True, False, len(memo), "converged at the start")
         result = optimize.minimize(
             objective,
             start.ravel(),
             jac=True,
             method="L-BFGS-B",
-            bounds=np.tile(bounds, (int(np.prod(shape[:-1])), 1)),
-            options={"maxiter": max_iterations},
+            bounds=flat_bounds,
+            options={"maxiter": max_iterations, "gtol": gradient_tolerance},
         )
+        fitted = result.x.reshape(shape)
+        if not np.all(np.isfinite(fitted)) or result.fun > start_total:
+            return FitResult(start, start_value, False, True, len(memo), str(result.message))
+        _, _, value = evaluate(result.x)
     except (NumericalError, np.linalg.LinAlgError, FloatingPointError) as error:
-        value, _ = _safe_likelihood(start, X, z, mask)
-        return FitResult(start, value, False, True, counter["evaluations"], str(error))
-    fitted = result.x.reshape(shape)
-    if not np.all(np.isfinite(fitted)) or -result.fun < start_value:
-        value, _ = _safe_likelihood(start, X, z, mask)
-        return FitResult(start, value, False, True, counter["evaluations"], str(result.message))
-    value, _ = log_marginal_likelihood(fitted, X, z, mask, with_gradient=False)
-    return FitResult(
-        fitted, value, bool(result.success), False, counter["evaluations"], str(result.message)
-    )
+        value, _ = _safe_likelihood(start, data)
+        return FitResult(start, value, False, True, len(memo), str(error))
+    return FitResult(fitted, value, bool(result.success), False, len(memo), str(result.message))
 
 
-def _safe_likelihood(log_params, X, z, mask):
+def _safe_likelihood(log_params, data):
     try:
-        return log_marginal_likelihood(log_params, X, z, mask, with_gradient=False)
+        return log_marginal_likelihood(log_params, data, with_gradient=False)
     except NumericalError:
         return np.full(np.shape(log_params)[:-1], -np.inf), None

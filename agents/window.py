@@ -3,14 +3,18 @@ expert arrays for the GP core."""
 
 from __future__ import annotations
 
+import functools
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from agents.gating import group_starts
+from agents.gp import TrainingData
 
-__all__ = ["StepRecord", "SlidingWindow", "ExpertData", "pad_by_group"]
+__all__ = [
+    "StepRecord", "SlidingWindow", "ExpertData", "pad_by_group", "window_prior_mean", "PRIOR_MEANS"
+]
 
 
 @dataclass(frozen=True)
@@ -52,20 +56,31 @@ class ExpertData:
     """Training data of the experts for both axes.
 
     ``sensors`` (M,) the expert sensors (a single -1 for one pooled expert); ``X`` (2, M, n,
-    d) inputs, ``z`` (2, M, n) outputs (centred by ``offset`` (2,)), ``mask`` (M, n);
-    ``steps`` (M, n) the step of every point.
+    d) inputs, ``z`` (2, M, n) outputs minus the prior mean, ``mask`` (M, n); ``steps`` (M,
+    n) the step of every point. The prior mean of each axis is ``intercept + slope * tau``
+    at the time ``tau`` relative to the window's end (:meth:`prior_mean`).
     """
 
     sensors: np.ndarray
     X: np.ndarray
     z: np.ndarray
     mask: np.ndarray
-    offset: np.ndarray
+    intercept: np.ndarray
+    slope: np.ndarray
     steps: np.ndarray
 
     @property
     def n_points(self) -> int:
         return int(self.mask.sum())
+
+    @functools.cached_property
+    def training(self) -> TrainingData:
+        """The GP core's prepared form of ``X``, ``z`` and ``mask``."""
+        return TrainingData.build(self.X, self.z, self.mask)
+
+    def prior_mean(self, relative_time: float) -> np.ndarray:
+        """(2,) prior mean of the coordinates at ``relative_time`` (s after the window's end)."""
+        return self.intercept + self.slope * relative_time
 
 
 class SlidingWindow:
@@ -92,13 +107,13 @@ class SlidingWindow:
         inside = [record for record in self.records if record.step > step - self.length]
         return inside if inside else list(self.records)
 
-    def expert_data(self, step: int, spatial: bool, centre: bool, pooled: bool) -> ExpertData | None:
+    def expert_data(self, step: int, spatial: bool, mean: str, pooled: bool) -> ExpertData | None:
         """Padded expert arrays of the window ending at ``step`` (None if there is no data).
 
         Inputs: the time relative to ``step`` (TGP), preceded for STGP by the previous
-        estimate of the same coordinate (eqs. (25)-(26)). Outputs are centred by the mean
-        of all summaries in the window when ``centre`` (else by 0, the paper's zero mean).
-        ``pooled`` puts every summary into one expert (the centralized GP).
+        estimate of the same coordinate (eqs. (25)-(26)). The GP models the outputs minus a
+        prior mean (:func:`window_prior_mean`). ``pooled`` puts every summary into one
+        expert (the centralized GP).
         """
         records = self.current(step)
         if not records:
@@ -112,12 +127,40 @@ class SlidingWindow:
         labels, mask, (padded_summaries, padded_steps, padded_previous) = pad_by_group(
             groups, summaries, steps, previous
         )
-        offset = summaries.mean(axis=0) if centre else np.zeros(2)
-        z = np.moveaxis(padded_summaries - offset, -1, 0) * mask
-        time = np.broadcast_to((padded_steps - step).astype(float), (2,) + mask.shape)
+        intercept, slope = window_prior_mean(mean, (steps - step).astype(float), summaries)
+        relative = (padded_steps - step).astype(float)
+        trend = intercept[:, None, None] + slope[:, None, None] * relative
+        z = (np.moveaxis(padded_summaries, -1, 0) - trend) * mask
+        time = np.broadcast_to(relative, (2,) + mask.shape)
         if spatial:
-            space = np.moveaxis(padded_previous - offset, -1, 0)
+            space = np.moveaxis(padded_previous, -1, 0) - intercept[:, None, None]
             X = np.stack([space, time], axis=-1)
         else:
             X = time[..., None]
-        return ExpertData(labels, X, z, mask, offset, padded_steps)
+        return ExpertData(labels, X, z, mask, intercept, slope, padded_steps)
+
+
+PRIOR_MEANS = ("linear", "window", "zero")
+
+
+def window_prior_mean(kind: str, times: np.ndarray, summaries: np.ndarray):
+    """Intercept and slope (each (2,)) of the GP prior mean over the window.
+
+    - ``"zero"``: the paper's zero-mean GP on raw coordinates;
+    - ``"window"``: the mean of the window's summaries (constant);
+    - ``"linear"``: the least-squares line through the summaries over time, a
+      constant-velocity trend; the GP models the deviations from it, and predictions
+      through a stretch without measurements follow the trend instead of reverting to a
+      constant. With a single time in the window the slope is 0.
+    """
+    if kind == "zero":
+        return np.zeros(2), np.zeros(2)
+    centre = summaries.mean(axis=0)
+    if kind == "window":
+        return centre, np.zeros(2)
+    if kind != "linear":
+        raise ValueError(f"mean must be one of {list(PRIOR_MEANS)}; got {kind!r}")
+    time_offset = times - times.mean()
+    spread = float(time_offset @ time_offset)
+    slope = (time_offset @ (summaries - centre)) / spread if spread > 0 else np.zeros(2)
+    return centre - slope * times.mean(), slope
