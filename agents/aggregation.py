@@ -96,7 +96,9 @@ def aggregate(
     aggregate_mean = aggregate_var * np.sum(weights * np.where(valid, mean, 0.0), axis=-1)
     single = valid.sum(axis=-1) == 1
     if np.any(single):
-        aggregate_mean = np.where(single, np.sum(np.where(valid, mean, 0.0), axis=-1), aggregate_mean)
+        aggregate_mean = np.where(
+            single, np.sum(np.where(valid, mean, 0.0), axis=-1), aggregate_mean
+        )
         aggregate_var = np.where(single, np.sum(np.where(valid, var, 0.0), axis=-1), aggregate_var)
         weights = np.where(single[..., None], precision_i, weights)
     return Aggregate(aggregate_mean, aggregate_var, weights)
@@ -117,9 +119,7 @@ def gamma_anytime(step: np.ndarray | int, n_experts: np.ndarray | int, delta: fl
     return 2.0 * np.log(pi_t * np.maximum(np.asarray(n_experts, dtype=float), 1.0) / delta)
 
 
-def convex_combination_bound(
-    std: np.ndarray, gamma: np.ndarray, weights: np.ndarray
-) -> np.ndarray:
+def convex_combination_bound(std: np.ndarray, gamma: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """sum_i w_i gamma_i^(1/2) sigma_i / sum_i w_i: the bound on |f - mu| of a mean that is the
     convex combination sum w_i mu_i / sum w_i, when every |f - mu_i| <= gamma_i^(1/2) sigma_i.
 
@@ -147,7 +147,9 @@ def ucb_half_width(
     """
     _, var, prior_var_expanded, valid = _prepare(np.zeros_like(var), var, prior_var, valid)
     n_experts = valid.sum(axis=-1)
-    gamma = gamma_one_step(n_experts, delta) if step is None else gamma_anytime(step, n_experts, delta)
+    gamma = (
+        gamma_one_step(n_experts, delta) if step is None else gamma_anytime(step, n_experts, delta)
+    )
     gamma = np.asarray(gamma)[..., None]
     if method in ("gpoe", "rbcm"):
         beta = np.where(valid, entropy_weights(var, prior_var_expanded), 0.0)

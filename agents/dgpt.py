@@ -36,7 +36,13 @@ from agents.window import PRIOR_MEANS, SlidingWindow, StepRecord
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
-__all__ = ["DGPT", "INITIAL_HYPERPARAMETERS", "HYPERPARAMETER_BOUNDS", "FIT_GRADIENT_TOLERANCE", "INPUTS"]
+__all__ = [
+    "DGPT",
+    "INITIAL_HYPERPARAMETERS",
+    "HYPERPARAMETER_BOUNDS",
+    "FIT_GRADIENT_TOLERANCE",
+    "INPUTS",
+]
 
 INPUTS = ("tgp", "stgp")
 
@@ -91,7 +97,7 @@ class DGPT(TrackerBase):
         self,
         aggregation: str = "rbcm",
         inputs: str = "tgp",
-        window: int = 10,
+        window: int = 4,
         delta: float = 0.003,
         mean: str = "linear",
         max_iterations: int = 5,
@@ -101,7 +107,9 @@ class DGPT(TrackerBase):
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.inputs = check_choice("inputs", inputs, INPUTS)
         self.window = check_integer("window", window, low=2)
-        self.delta = check_real("delta", delta, low=0.0, high=1.0, low_inclusive=False, high_inclusive=False)
+        self.delta = check_real(
+            "delta", delta, low=0.0, high=1.0, low_inclusive=False, high_inclusive=False
+        )
         self.mean = check_choice("mean", mean, PRIOR_MEANS)
         self.max_iterations = check_integer("max_iterations", max_iterations, low=1)
         self.anytime_ucb = bool(anytime_ucb)
@@ -115,7 +123,9 @@ class DGPT(TrackerBase):
         return self.inputs == "stgp"
 
     def _named_parameters(self) -> list[str]:
-        middle = ["space_lengthscale", "time_lengthscale"] if self._spatial else ["time_lengthscale"]
+        middle = (
+            ["space_lengthscale", "time_lengthscale"] if self._spatial else ["time_lengthscale"]
+        )
         return ["signal_var", *middle, "noise_var"]
 
     def initial_log_params(self) -> np.ndarray:
@@ -209,9 +219,14 @@ class DGPT(TrackerBase):
         space = np.broadcast_to((previous - data.intercept)[:, None, None, None], time.shape)
         return np.concatenate([space, time], axis=-1)
 
-    def _aggregate(self, mean: np.ndarray, var: np.ndarray, prior_var: np.ndarray, prior_mean):
+    def _aggregate(self, mean, var, prior_var, data, relative_time: float):
+        """Aggregate the experts' residual predictions and add back the prior mean; its
+        estimation variance adds to the aggregate's (:meth:`ExpertData.prior_mean_variance`)."""
         combined = agg.aggregate(self.aggregation, mean, var, prior_var)
-        return combined.mean + prior_mean, combined.var
+        trend_var = data.prior_mean_variance(
+            relative_time, prior_var + np.exp(self.log_params_[:, -1])
+        )
+        return combined.mean + data.prior_mean(relative_time), combined.var + trend_var
 
     def _predict(self, step: int, data) -> Estimate:
         log_params = self.log_params_
@@ -225,16 +240,21 @@ class DGPT(TrackerBase):
         x_now = self._test_inputs(data, 0.0, previous)
         mean_now, var_now = gp.predict(log_params, data.training, None, None, x_now, fact)
         estimate, estimate_var = self._aggregate(
-            mean_now[..., 0], var_now[..., 0], prior_var, data.prior_mean(0.0)
+            mean_now[..., 0], var_now[..., 0], prior_var, data, 0.0
         )
         x_next = self._test_inputs(data, 1.0, estimate)
         mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
         next_mean, next_var = self._aggregate(
-            mean_next[..., 0], var_next[..., 0], prior_var, data.prior_mean(1.0)
+            mean_next[..., 0], var_next[..., 0], prior_var, data, 1.0
         )
 
+        # The theorems' expert variances are those of the coordinate: residual GP plus trend.
+        trend_var = data.prior_mean_variance(0.0, prior_var + np.exp(log_params[:, -1]))
         ucb = agg.ucb_half_width(
-            self.aggregation, var_now[..., 0], prior_var, self.delta,
+            self.aggregation,
+            var_now[..., 0] + trend_var[:, None],
+            prior_var + trend_var,
+            self.delta,
             step=step + 1 if self.anytime_ucb else None,
         )
         self.estimate_ = estimate
@@ -245,5 +265,6 @@ class DGPT(TrackerBase):
         else:
             self.expert_sensors_ = data.sensors
             self.expert_next_mean_ = (mean_next[..., 0] + data.prior_mean(1.0)[:, None]).T
-            self.expert_next_var_ = var_next[..., 0].T
+            trend_var = data.prior_mean_variance(1.0, prior_var + np.exp(log_params[:, -1]))
+            self.expert_next_var_ = (var_next[..., 0] + trend_var[:, None]).T
         return Estimate(estimate.copy(), estimate_var, ucb, (next_mean, next_var))

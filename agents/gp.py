@@ -58,7 +58,9 @@ def unpack(log_params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.exp(log_params[..., 0]), np.exp(log_params[..., 1:-1]), np.exp(log_params[..., -1])
 
 
-def _scaled_squared_differences(x1: np.ndarray, x2: np.ndarray, lengthscales: np.ndarray) -> np.ndarray:
+def _scaled_squared_differences(
+    x1: np.ndarray, x2: np.ndarray, lengthscales: np.ndarray
+) -> np.ndarray:
     """((x1_a - x2_b) / l)^2 per input dimension: (..., n1, n2, d)."""
     diff = (x1[..., :, None, :] - x2[..., None, :, :]) / lengthscales[..., None, None, :]
     return diff * diff
@@ -176,12 +178,16 @@ def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
         for exponent in range(-10, 0, 2):
             jitter = scale * 10.0**exponent
             try:
-                inverse, log_det = _cholesky_inverse(sigma + (jitter * data.weight)[..., None] * np.eye(n))
+                inverse, log_det = _cholesky_inverse(
+                    sigma + (jitter * data.weight)[..., None] * np.eye(n)
+                )
                 break
             except np.linalg.LinAlgError:
                 continue
         else:
-            raise NumericalError("covariance matrix is not positive definite even with jitter") from None
+            raise NumericalError(
+                "covariance matrix is not positive definite even with jitter"
+            ) from None
     alpha = np.einsum("...ij,...j->...i", inverse, data.z)
     return Factorization(kernel, inverse, log_det, scaled, alpha, jitter)
 
@@ -214,7 +220,9 @@ def log_marginal_likelihood(
     noise = np.exp(np.asarray(log_params, dtype=float)[..., -1])
     inner_diagonal = np.diagonal(inner, axis1=-2, axis2=-1)
     grad_noise = 0.5 * noise * (inner_diagonal * data.weight).sum(axis=(-1, -2))
-    gradient = np.concatenate([grad_signal[..., None], grad_lengthscales, grad_noise[..., None]], axis=-1)
+    gradient = np.concatenate(
+        [grad_signal[..., None], grad_lengthscales, grad_noise[..., None]], axis=-1
+    )
     return value, gradient
 
 
@@ -234,7 +242,9 @@ def predict(
     """
     data = _as_data(X, z, mask)
     fact = factorize(log_params, data) if factorization is None else factorization
-    cross = se_kernel(data.X, np.asarray(X_test, dtype=float), log_params) * data.weight[..., :, None]
+    cross = (
+        se_kernel(data.X, np.asarray(X_test, dtype=float), log_params) * data.weight[..., :, None]
+    )
     mean = np.einsum("...ns,...n->...s", cross, fact.alpha)
     reduction = np.einsum("...ns,...nm,...ms->...s", cross, fact.inverse, cross)
     prior = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None]

@@ -13,7 +13,12 @@ from agents.gating import group_starts
 from agents.gp import TrainingData
 
 __all__ = [
-    "StepRecord", "SlidingWindow", "ExpertData", "pad_by_group", "window_prior_mean", "PRIOR_MEANS"
+    "StepRecord",
+    "SlidingWindow",
+    "ExpertData",
+    "pad_by_group",
+    "window_prior_mean",
+    "PRIOR_MEANS",
 ]
 
 
@@ -67,6 +72,7 @@ class ExpertData:
     mask: np.ndarray
     intercept: np.ndarray
     slope: np.ndarray
+    trend_covariance: np.ndarray
     steps: np.ndarray
 
     @property
@@ -82,14 +88,23 @@ class ExpertData:
         """(2,) prior mean of the coordinates at ``relative_time`` (s after the window's end)."""
         return self.intercept + self.slope * relative_time
 
+    def prior_mean_variance(self, relative_time: float, residual_var: np.ndarray) -> np.ndarray:
+        """(2,) variance of the estimated prior mean at ``relative_time``: the least-squares
+        coefficient covariance ``residual_var (H^T H)^-1`` mapped through ``[1, tau]``
+        (R&W Sec. 2.7: the uncertainty of explicit basis functions adds to the predictive
+        variance, and grows quadratically away from the data)."""
+        basis = np.array([1.0, relative_time])
+        return residual_var * float(basis @ self.trend_covariance @ basis)
+
 
 class SlidingWindow:
-    """The gated summaries of the last ``length`` steps (the window of C steps).
+    """The gated summaries of the window of C = ``length`` steps.
 
-    A sensor is an expert while it has at least one summary in the window. If the window
-    holds no summary (a stretch without measurements), the records of the last ``length``
-    steps that had summaries are used instead, so the tracker keeps predicting from its
-    most recent data, with a variance that grows with the distance in time.
+    The window ends at the latest step with summaries: at a step with measurements it is
+    the paper's window of the last C steps, and a sensor is an expert while it has at least
+    one summary in it. Through a stretch without measurements the window stays where the
+    data ended, so the tracker extrapolates from its most recent data with a variance that
+    grows steadily with the time since (rather than losing its data one step at a time).
     """
 
     def __init__(self, length: int) -> None:
@@ -98,14 +113,8 @@ class SlidingWindow:
 
     def add(self, record: StepRecord) -> None:
         self.records.append(record)
-        # keep the last `length` steps that had data (they stand in during a gap)
-        while self.records and self.records[0].step <= record.step - self.length:
+        while self.records[0].step <= record.step - self.length:
             self.records.popleft()
-
-    def current(self, step: int) -> list[StepRecord]:
-        """Records inside the window ending at ``step``, or the most recent ones (see class)."""
-        inside = [record for record in self.records if record.step > step - self.length]
-        return inside if inside else list(self.records)
 
     def expert_data(self, step: int, spatial: bool, mean: str, pooled: bool) -> ExpertData | None:
         """Padded expert arrays of the window ending at ``step`` (None if there is no data).
@@ -115,19 +124,23 @@ class SlidingWindow:
         prior mean (:func:`window_prior_mean`). ``pooled`` puts every summary into one
         expert (the centralized GP).
         """
-        records = self.current(step)
+        records = self.records
         if not records:
             return None
         counts = [record.sensors.size for record in records]
         sensors = np.concatenate([record.sensors for record in records])
         summaries = np.concatenate([record.summaries for record in records])
         steps = np.repeat([record.step for record in records], counts)
-        previous = np.repeat(np.array([record.previous_estimate for record in records]), counts, axis=0)
+        previous = np.repeat(
+            np.array([record.previous_estimate for record in records]), counts, axis=0
+        )
         groups = np.full(sensors.size, -1) if pooled else sensors
         labels, mask, (padded_summaries, padded_steps, padded_previous) = pad_by_group(
             groups, summaries, steps, previous
         )
-        intercept, slope = window_prior_mean(mean, (steps - step).astype(float), summaries)
+        intercept, slope, trend_covariance = window_prior_mean(
+            mean, (steps - step).astype(float), summaries
+        )
         relative = (padded_steps - step).astype(float)
         trend = intercept[:, None, None] + slope[:, None, None] * relative
         z = (np.moveaxis(padded_summaries, -1, 0) - trend) * mask
@@ -137,30 +150,46 @@ class SlidingWindow:
             X = np.stack([space, time], axis=-1)
         else:
             X = time[..., None]
-        return ExpertData(labels, X, z, mask, intercept, slope, padded_steps)
+        return ExpertData(labels, X, z, mask, intercept, slope, trend_covariance, padded_steps)
 
 
 PRIOR_MEANS = ("linear", "window", "zero")
 
 
 def window_prior_mean(kind: str, times: np.ndarray, summaries: np.ndarray):
-    """Intercept and slope (each (2,)) of the GP prior mean over the window.
+    """Intercept and slope (each (2,)) of the GP prior mean over the window, and the 2 x 2
+    matrix (H^T H)^-1 of the least-squares fit in the basis [1, tau] (zero where a
+    coefficient is fixed rather than estimated).
 
     - ``"zero"``: the paper's zero-mean GP on raw coordinates;
     - ``"window"``: the mean of the window's summaries (constant);
     - ``"linear"``: the least-squares line through the summaries over time, a
       constant-velocity trend; the GP models the deviations from it, and predictions
       through a stretch without measurements follow the trend instead of reverting to a
-      constant. With a single time in the window the slope is 0.
+      constant. With a single time in the window the slope is 0 (and treated as known).
     """
+    covariance = np.zeros((2, 2))
     if kind == "zero":
-        return np.zeros(2), np.zeros(2)
+        return np.zeros(2), np.zeros(2), covariance
     centre = summaries.mean(axis=0)
+    n = times.size
     if kind == "window":
-        return centre, np.zeros(2)
+        covariance[0, 0] = 1.0 / n
+        return centre, np.zeros(2), covariance
     if kind != "linear":
         raise ValueError(f"mean must be one of {list(PRIOR_MEANS)}; got {kind!r}")
-    time_offset = times - times.mean()
+    mean_time = times.mean()
+    time_offset = times - mean_time
     spread = float(time_offset @ time_offset)
-    slope = (time_offset @ (summaries - centre)) / spread if spread > 0 else np.zeros(2)
-    return centre - slope * times.mean(), slope
+    if spread == 0:
+        covariance[0, 0] = 1.0 / n
+        return centre, np.zeros(2), covariance
+    slope = (time_offset @ (summaries - centre)) / spread
+    # inverse of [[n, sum t], [sum t, sum t^2]] with sum t^2 - n mean^2 = spread
+    covariance[:] = np.array(
+        [
+            [1.0 / n + mean_time**2 / spread, -mean_time / spread],
+            [-mean_time / spread, 1.0 / spread],
+        ]
+    )
+    return centre - slope * mean_time, slope, covariance

@@ -37,6 +37,8 @@ register_tracker("centroid", entry_point="baselines.centroid:GatedCentroidTracke
 for _aggregation in ("rbcm", "gpoe", "bcm", "poe"):
     for _inputs in ("tgp", "stgp"):
         _id = f"dgpt-{_aggregation}" + ("" if _inputs == "tgp" else "-stgp")
-        register_tracker(_id, entry_point="agents.dgpt:DGPT", aggregation=_aggregation, inputs=_inputs)
+        register_tracker(
+            _id, entry_point="agents.dgpt:DGPT", aggregation=_aggregation, inputs=_inputs
+        )
 register_tracker("gp", entry_point="baselines.standard_gp:StandardGP", inputs="tgp")
 register_tracker("gp-stgp", entry_point="baselines.standard_gp:StandardGP", inputs="stgp")

@@ -30,9 +30,17 @@ def plot_scenarios(path: str | Path, layout_seed: int = 0, n_random: int = 3) ->
         reference = scenario.reference().positions
         axes.plot(*reference.T, c="tab:red", lw=1.5)
         axes.plot(*reference[0], "o", c="tab:red", ms=5)
-        axes.set(xlim=(0, 1000), ylim=(0, 1000), aspect="equal", title=f"{name}: {type(scenario).__name__}")
+        axes.set(
+            xlim=(0, 1000),
+            ylim=(0, 1000),
+            aspect="equal",
+            title=f"{name}: {type(scenario).__name__}",
+        )
         axes.tick_params(labelsize=7)
-    figure.suptitle("Reference trajectories (red, start marked), random draws (grey), sensors (triangles)", fontsize=9)
+    figure.suptitle(
+        "Reference trajectories (red, start marked), random draws (grey), sensors (triangles)",
+        fontsize=9,
+    )
     figure.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -48,8 +48,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.add_argument("--plot-scenarios", metavar="PNG", default=None,
-                        help="write the trajectories figure (paper Fig. 3) to PNG and exit")
+    parser.add_argument(
+        "--plot-scenarios",
+        metavar="PNG",
+        default=None,
+        help="write the trajectories figure (paper Fig. 3) to PNG and exit",
+    )
     return parser.parse_args(argv)
 
 

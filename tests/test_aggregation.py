@@ -41,7 +41,9 @@ def test_aggregations_by_hand():
     np.testing.assert_allclose(gpoe.weights, weights)
     rbcm = agg.aggregate("rbcm", mean, var, prior)
     precision = weights.sum() + (1 - beta.sum()) / prior
-    assert rbcm.var == pytest.approx(1 / precision) and rbcm.mean == pytest.approx(weights @ mean / precision)
+    assert rbcm.var == pytest.approx(1 / precision) and rbcm.mean == pytest.approx(
+        weights @ mean / precision
+    )
 
 
 @pytest.mark.parametrize("method", ["bcm", "rbcm"])
@@ -99,7 +101,9 @@ def test_ucb_by_hand_and_single_expert_lemma():
     expected_poe = np.sum(poe_weights * np.sqrt(gamma * var)) / poe_weights.sum()
     assert agg.ucb_half_width("poe", var, prior, delta) == pytest.approx(expected_poe)
     # one expert: Lemma 1, gamma^(1/2) sigma with gamma = 2 log(1 / delta)
-    assert agg.ucb_half_width("gpoe", np.array([0.5]), prior, delta) == pytest.approx(np.sqrt(2 * np.log(1 / delta) * 0.5))
+    assert agg.ucb_half_width("gpoe", np.array([0.5]), prior, delta) == pytest.approx(
+        np.sqrt(2 * np.log(1 / delta) * 0.5)
+    )
 
 
 def test_cumulative_bound_is_the_running_sum():
@@ -118,8 +122,14 @@ def test_ucb_covers_functions_drawn_from_the_prior(method):
     x_test = rng.uniform(0, 3, size=(draws, 1, 1, 1))
     everything = np.concatenate([X.reshape(draws, experts * points, 1), x_test[:, 0]], axis=1)
     cov = np.exp(-0.5 * ((everything[:, :, None, 0] - everything[:, None, :, 0]) / 0.5) ** 2)
-    f = np.einsum("dab,db->da", np.linalg.cholesky(cov + 1e-10 * np.eye(cov.shape[-1])), rng.normal(size=everything.shape[:2]))
-    z = f[:, :-1].reshape(draws, experts, points) + np.sqrt(0.05) * rng.normal(size=(draws, experts, points))
+    f = np.einsum(
+        "dab,db->da",
+        np.linalg.cholesky(cov + 1e-10 * np.eye(cov.shape[-1])),
+        rng.normal(size=everything.shape[:2]),
+    )
+    z = f[:, :-1].reshape(draws, experts, points) + np.sqrt(0.05) * rng.normal(
+        size=(draws, experts, points)
+    )
     params = np.broadcast_to(log_params, (draws, 3))
     mean, var = gp.predict(params, X, z, None, np.broadcast_to(x_test, (draws, experts, 1, 1)))
     combined = agg.aggregate(method, mean[..., 0], var[..., 0], np.ones(draws))

@@ -19,20 +19,33 @@ def random_problem(rng, batch=2, experts=3, points=6, dims=2, fill=0.7):
 
 def dense_expert(log_params, x, y):
     """Covariance, inverse and log-likelihood of one expert with explicit inverse and det."""
-    signal, lengthscales, noise = np.exp(log_params[0]), np.exp(log_params[1:-1]), np.exp(log_params[-1])
+    signal, lengthscales, noise = (
+        np.exp(log_params[0]),
+        np.exp(log_params[1:-1]),
+        np.exp(log_params[-1]),
+    )
     scaled = ((x[:, None, :] - x[None, :, :]) / lengthscales) ** 2
     kernel = signal * np.exp(-0.5 * scaled.sum(-1))
     sigma = kernel + noise * np.eye(len(x))
     inverse = np.linalg.inv(sigma)
-    value = -0.5 * y @ inverse @ y - 0.5 * np.log(np.linalg.det(sigma)) - 0.5 * len(x) * np.log(2 * np.pi)
+    value = (
+        -0.5 * y @ inverse @ y
+        - 0.5 * np.log(np.linalg.det(sigma))
+        - 0.5 * len(x) * np.log(2 * np.pi)
+    )
     return value, inverse
 
 
 def dense_likelihood(log_params, X, z, mask):
-    return np.array([
-        sum(dense_expert(log_params[b], X[b, m][mask[m]], z[b, m][mask[m]])[0] for m in range(X.shape[1]))
-        for b in range(X.shape[0])
-    ])
+    return np.array(
+        [
+            sum(
+                dense_expert(log_params[b], X[b, m][mask[m]], z[b, m][mask[m]])[0]
+                for m in range(X.shape[1])
+            )
+            for b in range(X.shape[0])
+        ]
+    )
 
 
 @settings(max_examples=25, deadline=None)
@@ -40,13 +53,18 @@ def dense_likelihood(log_params, X, z, mask):
 def test_likelihood_equals_dense_formula(seed, dims, points):
     log_params, X, z, mask = random_problem(np.random.default_rng(seed), points=points, dims=dims)
     value, _ = gp.log_marginal_likelihood(log_params, X, z, mask)
-    np.testing.assert_allclose(value, dense_likelihood(log_params, X, z, mask), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        value, dense_likelihood(log_params, X, z, mask), rtol=1e-9, atol=1e-9
+    )
 
 
 def test_factorized_likelihood_is_the_sum_of_single_experts():
     log_params, X, z, mask = random_problem(np.random.default_rng(1), batch=1, experts=4)
     together, gradient = gp.log_marginal_likelihood(log_params, X, z, mask)
-    singles = [gp.log_marginal_likelihood(log_params, X[:, m:m + 1], z[:, m:m + 1], mask[m:m + 1]) for m in range(4)]
+    singles = [
+        gp.log_marginal_likelihood(log_params, X[:, m : m + 1], z[:, m : m + 1], mask[m : m + 1])
+        for m in range(4)
+    ]
     np.testing.assert_allclose(together, sum(value for value, _ in singles), rtol=1e-12)
     np.testing.assert_allclose(gradient, sum(grad for _, grad in singles), rtol=1e-10)
 
@@ -89,7 +107,9 @@ def test_prediction_equals_dense_formula():
             x, y = X[b, m][mask[m]], z[b, m][mask[m]]
             _, inverse = dense_expert(log_params[b], x, y)
             signal, length = np.exp(log_params[b, 0]), np.exp(log_params[b, 1])
-            cross = signal * np.exp(-0.5 * ((x[:, None, 0] - X_test[b, m][None, :, 0]) / length) ** 2)
+            cross = signal * np.exp(
+                -0.5 * ((x[:, None, 0] - X_test[b, m][None, :, 0]) / length) ** 2
+            )
             np.testing.assert_allclose(mean[b, m], cross.T @ inverse @ y, rtol=1e-9, atol=1e-12)
             expected_var = signal - np.einsum("ns,nm,ms->s", cross, inverse, cross)
             np.testing.assert_allclose(var[b, m], expected_var, rtol=1e-8, atol=1e-12)
@@ -129,7 +149,9 @@ def test_fit_recovers_generating_hyperparameters():
     truth = np.log([4.0, 0.7, 0.25])
     experts, points = 40, 25
     X = rng.uniform(0, 10, size=(1, experts, points, 1))
-    sigma = 4.0 * np.exp(-0.5 * ((X[0, :, :, None, 0] - X[0, :, None, :, 0]) / 0.7) ** 2) + 0.25 * np.eye(points)
+    sigma = 4.0 * np.exp(
+        -0.5 * ((X[0, :, :, None, 0] - X[0, :, None, :, 0]) / 0.7) ** 2
+    ) + 0.25 * np.eye(points)
     z = np.einsum("mab,mb->ma", np.linalg.cholesky(sigma), rng.normal(size=(experts, points)))[None]
     result = gp.fit_hyperparameters(np.log([[1.0, 2.0, 1.0]]), X, z, max_iterations=200)
     assert result.converged and not result.kept_start
@@ -143,7 +165,11 @@ def test_fit_recovers_generating_hyperparameters():
         minus = gp.log_marginal_likelihood((estimate - shift)[None], X, z)[1][0]
         hessian[:, j] = (plus - minus) / (2 * step)
     standard_errors = np.sqrt(np.diag(np.linalg.inv(-hessian)))
-    assert np.all(np.abs(estimate - truth) <= 4 * standard_errors), (estimate, truth, standard_errors)
+    assert np.all(np.abs(estimate - truth) <= 4 * standard_errors), (
+        estimate,
+        truth,
+        standard_errors,
+    )
     assert np.all(standard_errors < 0.2)  # the test has power: the errors are small
 
 
@@ -164,7 +190,9 @@ def test_fit_keeps_the_start_when_the_likelihood_breaks(monkeypatch):
 def test_fit_stops_at_once_at_an_optimum():
     rng = np.random.default_rng(8)
     log_params, X, z, mask = random_problem(rng)
-    first = gp.fit_hyperparameters(log_params, X, z, mask, max_iterations=500, gradient_tolerance=1e-6)
+    first = gp.fit_hyperparameters(
+        log_params, X, z, mask, max_iterations=500, gradient_tolerance=1e-6
+    )
     second = gp.fit_hyperparameters(first.log_params, X, z, mask, gradient_tolerance=1e-3)
     assert second.message == "converged at the start" and second.n_evaluations == 1
     np.testing.assert_array_equal(second.log_params, first.log_params)
