@@ -151,6 +151,7 @@ class DGPT(TrackerBase):
         self.n_experts_ = 0
         self.fit_failures_ = 0
         self.last_fit_: gp.FitResult | None = None
+        self._model = None
 
     def update(self, obs: dict) -> Estimate:
         if self.spec_ is None:
@@ -219,13 +220,11 @@ class DGPT(TrackerBase):
         space = np.broadcast_to((previous - data.intercept)[:, None, None, None], time.shape)
         return np.concatenate([space, time], axis=-1)
 
-    def _aggregate(self, mean, var, prior_var, data, relative_time: float):
+    def _aggregate(self, mean, var, prior_var, data, relative_time: float, residual_var):
         """Aggregate the experts' residual predictions and add back the prior mean; its
         estimation variance adds to the aggregate's (:meth:`ExpertData.prior_mean_variance`)."""
         combined = agg.aggregate(self.aggregation, mean, var, prior_var)
-        trend_var = data.prior_mean_variance(
-            relative_time, prior_var + np.exp(self.log_params_[:, -1])
-        )
+        trend_var = data.prior_mean_variance(relative_time, residual_var)
         return combined.mean + data.prior_mean(relative_time), combined.var + trend_var
 
     def _predict(self, step: int, data) -> Estimate:
@@ -236,20 +235,16 @@ class DGPT(TrackerBase):
             log_params = self.log_params_ = self.initial_log_params()
             fact = gp.factorize(log_params, data.training)
         prior_var = np.exp(log_params[:, 0])
+        residual_var = prior_var + np.exp(log_params[:, -1])  # marginal variance of a summary
+        self._model = (data, fact, log_params, prior_var, residual_var)
         previous = self.estimate_ if self.estimate_ is not None else data.prior_mean(-1.0)
         x_now = self._test_inputs(data, 0.0, previous)
         mean_now, var_now = gp.predict(log_params, data.training, None, None, x_now, fact)
         estimate, estimate_var = self._aggregate(
-            mean_now[..., 0], var_now[..., 0], prior_var, data, 0.0
+            mean_now[..., 0], var_now[..., 0], prior_var, data, 0.0, residual_var
         )
-        x_next = self._test_inputs(data, 1.0, estimate)
-        mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
-        next_mean, next_var = self._aggregate(
-            mean_next[..., 0], var_next[..., 0], prior_var, data, 1.0
-        )
-
         # The theorems' expert variances are those of the coordinate: residual GP plus trend.
-        trend_var = data.prior_mean_variance(0.0, prior_var + np.exp(log_params[:, -1]))
+        trend_var = data.prior_mean_variance(0.0, residual_var)
         ucb = agg.ucb_half_width(
             self.aggregation,
             var_now[..., 0] + trend_var[:, None],
@@ -257,14 +252,27 @@ class DGPT(TrackerBase):
             self.delta,
             step=step + 1 if self.anytime_ucb else None,
         )
-        self.estimate_ = estimate
-        self.prior_next_ = (next_mean, next_var)
         self.n_experts_ = data.sensors.size
+        prior_next = self.set_estimate(estimate)
+        return Estimate(estimate.copy(), estimate_var, ucb, prior_next)
+
+    def set_estimate(self, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Take ``estimate`` (2,) as this step's estimate and predict the next step from it:
+        the spatial input of STGP is the estimate (the hybrid filter feeds its posterior
+        back here). Returns and stores the aggregated next-step prediction (mean, var) and
+        each expert's, which gate the next step's measurements."""
+        data, fact, log_params, prior_var, residual_var = self._model
+        self.estimate_ = np.asarray(estimate, dtype=float).copy()
+        x_next = self._test_inputs(data, 1.0, self.estimate_)
+        mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
+        self.prior_next_ = self._aggregate(
+            mean_next[..., 0], var_next[..., 0], prior_var, data, 1.0, residual_var
+        )
         if self.pooled:
             self.expert_sensors_ = np.empty(0, dtype=np.int64)
         else:
             self.expert_sensors_ = data.sensors
             self.expert_next_mean_ = (mean_next[..., 0] + data.prior_mean(1.0)[:, None]).T
-            trend_var = data.prior_mean_variance(1.0, prior_var + np.exp(log_params[:, -1]))
-            self.expert_next_var_ = (var_next[..., 0] + trend_var[:, None]).T
-        return Estimate(estimate.copy(), estimate_var, ucb, (next_mean, next_var))
+            next_trend_var = data.prior_mean_variance(1.0, residual_var)
+            self.expert_next_var_ = (var_next[..., 0] + next_trend_var[:, None]).T
+        return self.prior_next_

@@ -42,3 +42,6 @@ for _aggregation in ("rbcm", "gpoe", "bcm", "poe"):
         )
 register_tracker("gp", entry_point="baselines.standard_gp:StandardGP", inputs="tgp")
 register_tracker("gp-stgp", entry_point="baselines.standard_gp:StandardGP", inputs="stgp")
+register_tracker("hybrid", entry_point="agents.hybrid:HybridFilter", variant="exact")
+register_tracker("hybrid-paper", entry_point="agents.hybrid:HybridFilter", variant="paper")
+register_tracker("cpf", entry_point="baselines.cpf:MultipleModelCPF")

@@ -1,20 +1,35 @@
 #!/usr/bin/env python
 """Benchmarks of dgpt-gym; prints ratios taken in one run (see docs/performance.md).
 
-env: step cost of ``DGPTrack-v0`` versus ``CartPole-v1``, both through ``gymnasium.make``
-(so both carry Gymnasium's default wrappers), resets included as episodes end. Goal <= 3.
+- env: step cost of ``DGPTrack-v0`` versus ``CartPole-v1``, both through ``gymnasium.make``
+  (so both carry Gymnasium's default wrappers), resets included as episodes end. Goal <= 3.
+- dgpt-step: median time of one DGPT-RBCM update (TGP, window 10, both axes, steps with
+  2-3 experts, warm-started learning). Goal <= 0.5 ms.
+- sklearn: full-GP log marginal likelihood + gradient versus scikit-learn's
+  ``GaussianProcessRegressor.log_marginal_likelihood(theta, eval_gradient=True)`` on the same
+  data and kernel, N = 1000, 2000, 4000. Goal: ratio <= 1.
+- training-time: the paper's Sec. VII-A experiment (Fig. 2): f(x) = 5 x1^2 + sin(12 x2),
+  sigma_z = 0.5; likelihood + gradient of the full GP and of DGP with M = 2, 5, 10, 20
+  experts, N = 500 .. 10000; writes docs/training_time.csv and docs/figures/training_time.png.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import platform
 import time
+from functools import partial
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import dgpt_gym
+from agents import gp
+from dgpt_gym.registry import make_tracker
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
 def step_cost(env: gym.Env, action, n_steps: int, seed: int = 0) -> float:
@@ -44,21 +59,174 @@ def bench_env(n_steps: int, repeats: int, env_kwargs: dict) -> dict:
     }
 
 
+def bench_dgpt_step(episodes: int) -> dict:
+    """Median DGPT-RBCM update time over steps with 2-3 experts (S1, clutter rate 1)."""
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    times = []
+    for seed in range(episodes):
+        tracker = make_tracker("dgpt-rbcm", window=10)
+        observation, info = env.reset(seed=seed)
+        tracker.reset(info["problem_spec"])
+        truncated = False
+        while not truncated:
+            started = time.perf_counter()
+            estimate = tracker.update(observation)
+            elapsed = time.perf_counter() - started
+            if 2 <= tracker.n_experts_ <= 3:
+                times.append(elapsed)
+            observation, _, _, truncated, _ = env.step(estimate.mean)
+    return {
+        "DGPT-RBCM step, median (ms, goal <= 0.5)": 1e3 * float(np.median(times)),
+        "DGPT-RBCM step, 90th percentile (ms)": 1e3 * float(np.percentile(times, 90)),
+        "steps measured": len(times),
+    }
+
+
+def paper_function_data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Sec. VII-A: x uniform in [0, 1]^2, z = 5 x1^2 + sin(12 x2) + N(0, 0.5^2)."""
+    x = rng.uniform(size=(n, 2))
+    return x, 5 * x[:, 0] ** 2 + np.sin(12 * x[:, 1]) + 0.5 * rng.normal(size=n)
+
+
+def best_time(function, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - started)
+    return min(times)
+
+
+def bench_sklearn(sizes: list[int], repeats: int) -> dict:
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+
+    rng = np.random.default_rng(0)
+    results = {}
+    for n in sizes:
+        x, z = paper_function_data(n, rng)
+        kernel = ConstantKernel(1.0) * RBF([0.3, 0.3]) + WhiteKernel(0.25)
+        model = GaussianProcessRegressor(kernel, alpha=0.0, optimizer=None).fit(x, z)
+        theta = model.kernel_.theta  # log constant, log length scales, log noise: our order
+        ours_value, _ = gp.log_marginal_likelihood(theta[None], x[None, None], z[None, None])
+        theirs_value, _ = model.log_marginal_likelihood(theta, eval_gradient=True)
+        assert abs(ours_value[0] - theirs_value) <= 1e-6 * abs(theirs_value), (
+            "implementations disagree"
+        )
+        ours = best_time(
+            partial(gp.log_marginal_likelihood, theta[None], x[None, None], z[None, None]), repeats
+        )
+        theirs = best_time(
+            partial(model.log_marginal_likelihood, theta, eval_gradient=True), repeats
+        )
+        results[f"N={n}: ours (s) / scikit-learn (s) = ratio (goal <= 1)"] = (
+            f"{ours:.3f} / {theirs:.3f} = {ours / theirs:.2f}"
+        )
+    return results
+
+
+def bench_training_time(
+    sizes: list[int], experts: list[int], repeats: int, full_gp_max: int
+) -> list[dict]:
+    """Time of the (factorized) log marginal likelihood and gradient; one row per (N, M)."""
+    rng = np.random.default_rng(1)
+    log_params = np.log([[1.0, 0.3, 0.3, 0.25]])
+    rows = []
+    for n in sizes:
+        x, z = paper_function_data(n, rng)
+        for m in [1, *experts]:
+            if m == 1 and n > full_gp_max:
+                continue
+            size = n // m
+            X = x[: m * size].reshape(1, m, size, 2)
+            Z = z[: m * size].reshape(1, m, size)
+            seconds = best_time(partial(gp.log_marginal_likelihood, log_params, X, Z), repeats)
+            rows.append({"N": n, "M": m, "seconds": seconds})
+    return rows
+
+
+def write_training_time(rows: list[dict]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with (DOCS / "training_time.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=["N", "M", "seconds"])
+        writer.writeheader()
+        writer.writerows(rows)
+    figure, axes = plt.subplots(figsize=(6, 4), dpi=80)
+    for m in sorted({row["M"] for row in rows}):
+        points = [(row["N"], row["seconds"]) for row in rows if row["M"] == m]
+        label = "full GP" if m == 1 else f"DGP, M = {m}"
+        axes.plot(*zip(*points), marker="o", label=label)
+    axes.set(
+        xscale="log",
+        yscale="log",
+        xlabel="training data N",
+        ylabel="log likelihood + gradient (s)",
+        title="Training time (paper Fig. 2): f(x) = 5 x1^2 + sin(12 x2)",
+    )
+    axes.legend()
+    figure.tight_layout()
+    (DOCS / "figures").mkdir(parents=True, exist_ok=True)
+    figure.savefig(DOCS / "figures" / "training_time.png")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--only",
+        nargs="+",
+        default=["env", "dgpt-step", "sklearn", "training-time"],
+        choices=["env", "dgpt-step", "sklearn", "training-time"],
+        help="sections to run",
+    )
     parser.add_argument("--steps", type=int, default=20000, help="env steps per repeat")
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats")
     parser.add_argument("--scenario", default="S2")
     parser.add_argument("--clutter-rate", type=float, default=5.0)
+    parser.add_argument(
+        "--episodes", type=int, default=10, help="episodes of the DGPT step benchmark"
+    )
+    parser.add_argument(
+        "--full-gp-max", type=int, default=10000, help="largest N of the full GP in training-time"
+    )
     args = parser.parse_args(argv)
     print(
         f"dgpt-gym {dgpt_gym.__version__}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, gymnasium {gym.__version__}, {platform.machine()}"
     )
-    env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
-    print(f"\n## env step cost ({env_kwargs}, {args.steps} steps x {args.repeats} repeats)")
-    for key, value in bench_env(args.steps, args.repeats, env_kwargs).items():
-        print(f"{key}: {value:.2f}")
+    if "env" in args.only:
+        env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
+        print(f"\n## env step cost ({env_kwargs}, {args.steps} steps x {args.repeats} repeats)")
+        for key, value in bench_env(args.steps, args.repeats, env_kwargs).items():
+            print(f"{key}: {value:.2f}")
+    if "dgpt-step" in args.only:
+        print(f"\n## DGPT-RBCM step (TGP, window 10, 2-3 experts, {args.episodes} episodes of S1)")
+        for key, value in bench_dgpt_step(args.episodes).items():
+            print(f"{key}: {value:.3f}" if isinstance(value, float) else f"{key}: {value}")
+    if "sklearn" in args.only:
+        print("\n## full-GP log marginal likelihood + gradient versus scikit-learn")
+        for key, value in bench_sklearn([1000, 2000, 4000], repeats=3).items():
+            print(f"{key}")
+            print(f"  {value}")
+    if "training-time" in args.only:
+        print("\n## training time (paper Sec. VII-A): seconds per likelihood + gradient")
+        sizes, experts = [500, 1000, 2000, 5000, 10000], [2, 5, 10, 20]
+        rows = bench_training_time(sizes, experts, repeats=2, full_gp_max=args.full_gp_max)
+        write_training_time(rows)
+        header = (
+            "| N | full GP | " + " | ".join(f"M = {m}" for m in experts) + " | speed-up M = 20 |"
+        )
+        print(header)
+        print("|---" * (len(experts) + 3) + "|")
+        for n in sizes:
+            by_m = {row["M"]: row["seconds"] for row in rows if row["N"] == n}
+            cells = [f"{by_m[1]:.4f}" if 1 in by_m else "-"] + [f"{by_m[m]:.4f}" for m in experts]
+            speedup = f"{by_m[1] / by_m[20]:.0f}x" if 1 in by_m else "-"
+            print(f"| {n} | " + " | ".join(cells) + f" | {speedup} |")
+        print("wrote docs/training_time.csv and docs/figures/training_time.png")
     return 0
 
 

@@ -196,3 +196,21 @@ def test_fit_stops_at_once_at_an_optimum():
     second = gp.fit_hyperparameters(first.log_params, X, z, mask, gradient_tolerance=1e-3)
     assert second.message == "converged at the start" and second.n_evaluations == 1
     np.testing.assert_array_equal(second.log_params, first.log_params)
+
+
+def test_full_gp_equals_scikit_learn():
+    """The same data, kernel and hyperparameters in scikit-learn (ConstantKernel x ARD RBF +
+    WhiteKernel, parameters in the same log order) give the same likelihood and gradient."""
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+
+    rng = np.random.default_rng(9)
+    x = rng.uniform(size=(80, 2))
+    z = 5 * x[:, 0] ** 2 + np.sin(12 * x[:, 1]) + 0.5 * rng.normal(size=80)
+    kernel = ConstantKernel(2.0) * RBF([0.3, 0.2]) + WhiteKernel(0.3)
+    model = GaussianProcessRegressor(kernel, alpha=0.0, optimizer=None).fit(x, z)
+    theta = model.kernel_.theta
+    expected_value, expected_gradient = model.log_marginal_likelihood(theta, eval_gradient=True)
+    value, gradient = gp.log_marginal_likelihood(theta[None], x[None, None], z[None, None])
+    assert value[0] == pytest.approx(expected_value, rel=1e-10)
+    np.testing.assert_allclose(gradient[0], expected_gradient, rtol=1e-8)

@@ -20,6 +20,8 @@ def run_script(name, *args):
 def test_evaluate_prints_the_nrmse_table():
     result = run_script(
         "evaluate.py",
+        "--trackers",
+        "centroid",
         "--scenarios",
         "S1",
         "S4",
@@ -47,8 +49,22 @@ def test_evaluate_rejects_unknown_names_with_the_valid_ones():
     assert result.returncode == 2 and "'S1', 'S2', 'S3', 'S4'" in result.stderr
 
 
-def test_bench_prints_the_cartpole_ratio():
-    result = run_script("bench.py", "--steps", "300", "--repeats", "1")
+def test_bench_prints_its_figures():
+    # the quick sections only: sklearn and training-time take minutes (and write docs/)
+    result = run_script(
+        "bench.py",
+        "--only",
+        "env",
+        "dgpt-step",
+        "--steps",
+        "300",
+        "--repeats",
+        "1",
+        "--episodes",
+        "1",
+    )
     assert result.returncode == 0, result.stderr
     ratio = re.search(r"ratio DGPTrack / CartPole \(goal <= 3\): ([\d.]+)", result.stdout)
     assert ratio and float(ratio.group(1)) > 0
+    step = re.search(r"DGPT-RBCM step, median \(ms, goal <= 0.5\): ([\d.]+)", result.stdout)
+    assert step and float(step.group(1)) > 0

@@ -1,0 +1,193 @@
+"""Tables laid out like the paper's Tables II-IX, with the paper's values beside ours.
+
+The paper's NRMSEs are transcribed once into ``data/paper_nrmse.csv`` (with the table each
+comes from). Rows are noise level x clutter rate, columns approach x axis; every cell shows
+our NRMSE, the paper's and the difference, in percent.
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "PAPER_NRMSE_PATH",
+    "paper_nrmse",
+    "tracker_id",
+    "paper_table_markdown",
+    "summary_against_paper",
+    "write_paper_tables",
+    "APPROACHES",
+]
+
+PAPER_NRMSE_PATH = Path(__file__).with_name("data") / "paper_nrmse.csv"
+APPROACHES = ("gp", "dgpt-rbcm", "dgpt-gpoe")
+APPROACH_NAMES = {"gp": "Standard GP", "dgpt-rbcm": "DGPT-RBCM", "dgpt-gpoe": "DGPT-GPoE"}
+
+
+@functools.lru_cache(maxsize=1)
+def paper_nrmse() -> dict[tuple, tuple[float, str]]:
+    """``{(inputs, scenario, noise_std, clutter_rate, approach, axis): (percent, table)}``."""
+    with PAPER_NRMSE_PATH.open() as handle:
+        lines = [line for line in handle if not line.startswith("#")]
+    table = {}
+    for row in csv.DictReader(lines):
+        key = (
+            row["inputs"],
+            row["scenario"],
+            float(row["noise_std"]),
+            float(row["clutter_rate"]),
+            row["approach"],
+            row["axis"],
+        )
+        table[key] = (float(row["nrmse_percent"]), row["table"])
+    return table
+
+
+def tracker_id(approach: str, inputs: str) -> str:
+    """The registered tracker of a paper approach: ``gp`` / ``dgpt-rbcm`` / ``dgpt-gpoe``
+    with ``-stgp`` appended for spatio-temporal inputs."""
+    return approach if inputs == "tgp" else f"{approach}-stgp"
+
+
+def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
+    """One of Tables II-IX: ``rows`` are :func:`~dgpt_gym.evaluation.evaluate_grid` rows."""
+    ours = {
+        (r["tracker"], r["noise_std"], r["clutter_rate"]): r
+        for r in rows
+        if r["scenario"] == scenario
+    }
+    paper = paper_nrmse()
+    table_name = next(name for key, (_, name) in paper.items() if key[:2] == (inputs, scenario))
+    noise_levels = sorted({key[1] for key in ours})
+    clutter_rates = sorted({key[2] for key in ours})
+    header = ["noise std (m)", "clutter rate"] + [
+        f"{APPROACH_NAMES[a]} {axis.upper()}" for a in APPROACHES for axis in "xy"
+    ]
+    lines = [
+        f"**{scenario}, {inputs.upper()}** (paper: {table_name}). Cells: ours % (paper %, ours - paper).",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+    ]
+    for noise in noise_levels:
+        for clutter in clutter_rates:
+            cells = [f"{noise:g}", f"{clutter:g}"]
+            for approach in APPROACHES:
+                row = ours.get((tracker_id(approach, inputs), noise, clutter))
+                for axis in "xy":
+                    reference = paper.get((inputs, scenario, noise, clutter, approach, axis))
+                    if row is None:
+                        cells.append("-")
+                        continue
+                    value = 100 * row[f"nrmse_{axis}"]
+                    if reference is None or not np.isfinite(value):
+                        cells.append(f"{value:.2f}")
+                    else:
+                        cells.append(
+                            f"{value:.2f} ({reference[0]:.2f}, {value - reference[0]:+.2f})"
+                        )
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def summary_against_paper(rows: list[dict]) -> dict[str, float]:
+    """How our NRMSEs compare with the paper's over every cell both have: the number of
+    cells, those at or below the paper's, and the mean of ours and of the paper's (%)."""
+    paper = paper_nrmse()
+    ours, theirs = [], []
+    for row in rows:
+        for inputs in ("tgp", "stgp"):
+            for approach in APPROACHES:
+                if row["tracker"] != tracker_id(approach, inputs):
+                    continue
+                for axis in "xy":
+                    key = (
+                        inputs,
+                        row["scenario"],
+                        row["noise_std"],
+                        row["clutter_rate"],
+                        approach,
+                        axis,
+                    )
+                    if key in paper:
+                        ours.append(100 * row[f"nrmse_{axis}"])
+                        theirs.append(paper[key][0])
+    ours, theirs = np.array(ours), np.array(theirs)
+    return {
+        "cells": int(ours.size),
+        "at_or_below_paper": int(np.sum(ours <= theirs)),
+        "mean_ours": float(ours.mean()) if ours.size else float("nan"),
+        "mean_paper": float(theirs.mean()) if theirs.size else float("nan"),
+    }
+
+
+def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None:
+    """Markdown with one paper-style table per scenario and input type, and a CSV of ``rows``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    summary = summary_against_paper(rows)
+    runs = sorted({row["n_runs"] for row in rows})
+    parts = [
+        "## NRMSE beside the paper's Tables II-IX",
+        "",
+        f"Command: `{command}` ({', '.join(map(str, runs))} Monte Carlo runs per cell, seeds from 0;"
+        " window lengths tuned per scenario on training seeds, `dgpt_gym/tuned_windows.json`).",
+        "",
+        f"Summary: {summary['at_or_below_paper']} of {summary['cells']} cells at or below the paper's value;"
+        f" mean NRMSE {summary['mean_ours']:.2f} % (paper {summary['mean_paper']:.2f} %).",
+        "",
+    ]
+    scenarios = sorted({row["scenario"] for row in rows})
+    for inputs in ("tgp", "stgp"):
+        for scenario in scenarios:
+            parts += [paper_table_markdown(rows, scenario, inputs), ""]
+    parts += windows_markdown()
+    path.write_text("\n".join(parts))
+    keys = list(rows[0])
+    with path.with_suffix(path.suffix + ".csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def windows_markdown() -> list[str]:
+    """The tuned window lengths and the grid-search scores they were chosen by."""
+    from dgpt_gym.tuning import TRAINING_SEEDS, TUNED_WINDOWS_PATH
+
+    if not TUNED_WINDOWS_PATH.exists():
+        return []
+    import json
+
+    stored = json.loads(TUNED_WINDOWS_PATH.read_text())
+    grid = stored["grid"]
+    windows = sorted({row["window"] for row in grid})
+    lines = [
+        "## Window lengths",
+        "",
+        "Chosen by `python scripts/evaluate.py --tune-windows`: for each tracker and scenario the window"
+        f" with the lowest NRMSE (mean over axes, clutter rates 1 and 5, sigma_z = 1, training seeds"
+        f" {TRAINING_SEEDS.start}-{TRAINING_SEEDS.stop - 1}, disjoint from the evaluation seeds). Cells: NRMSE %"
+        " of each window; the chosen one in bold.",
+        "",
+        "| tracker | scenario | " + " | ".join(f"C = {w}" for w in windows) + " |",
+        "|---|---|" + "---|" * len(windows),
+    ]
+    for tracker, by_scenario in stored["windows"].items():
+        for scenario, chosen in by_scenario.items():
+            scores = {
+                row["window"]: row["nrmse"]
+                for row in grid
+                if row["tracker"] == tracker and row["scenario"] == scenario
+            }
+            cells = [
+                (f"**{100 * scores[w]:.2f}**" if w == chosen else f"{100 * scores[w]:.2f}")
+                if w in scores
+                else "-"
+                for w in windows
+            ]
+            lines.append(f"| {tracker} | {scenario} | " + " | ".join(cells) + " |")
+    return lines + [""]

@@ -1,0 +1,217 @@
+"""The Poisson likelihood, the hybrid Bayesian filter and the multiple-model CPF."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
+from agents.likelihood import PoissonLikelihood
+from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
+from dgpt_gym import make_tracker
+from dgpt_gym.evaluation import run_episode
+from dgpt_gym.problem import ProblemSpec
+
+LIKELIHOOD = PoissonLikelihood(
+    clutter_rate=5.0, detection_rate=1.0, noise_std=1.0, sensing_area=np.pi * 50.0**2
+)
+
+
+def direct_likelihood(x, measurements, model=LIKELIHOOD):
+    value = 1.0
+    for z in measurements:
+        gaussian = np.exp(-0.5 * np.sum((z - x) ** 2) / model.noise_std**2) / (
+            2 * np.pi * model.noise_std**2
+        )
+        value *= model.clutter_rate / model.sensing_area + model.detection_rate * gaussian
+    return value
+
+
+def test_likelihood_equals_the_direct_product():
+    rng = np.random.default_rng(0)
+    measurements = rng.normal(scale=3.0, size=(6, 2))
+    positions = rng.normal(scale=3.0, size=(10, 2))
+    expected = np.log([direct_likelihood(x, measurements) for x in positions])
+    np.testing.assert_allclose(
+        LIKELIHOOD.log_likelihood(positions, measurements), expected, rtol=1e-12
+    )
+
+
+def test_likelihood_of_200_measurements_does_not_underflow():
+    rng = np.random.default_rng(1)
+    measurements = rng.uniform(-50, 50, size=(200, 2))
+    positions = rng.uniform(-50, 50, size=(5, 2))
+    direct = np.array([direct_likelihood(x, measurements) for x in positions])
+    assert np.all(direct == 0.0)  # the plain product underflows
+    value = LIKELIHOOD.log_likelihood(positions, measurements)
+    per_factor = np.array(
+        [[np.log(direct_likelihood(x, z[None])) for z in measurements] for x in positions]
+    )
+    np.testing.assert_allclose(value, per_factor.sum(axis=1), rtol=1e-12)
+
+
+def test_paper_variant_by_hand():
+    # prior mu = (10, -3), sigma^2 = (4, 9); lambda_T = 2, sigma_z = 1.5 -> s^2 = 9; c = 0.1
+    model = PoissonLikelihood(clutter_rate=0.1, detection_rate=2.0, noise_std=1.5, sensing_area=1.0)
+    measurements = np.array([[11.0, -2.0], [13.0, -5.0]])
+    mean, var = paper_posterior(np.array([10.0, -3.0]), np.array([4.0, 9.0]), measurements, model)
+    # x: (10 * 9 + 4 * ((22 - 0.2) + (26 - 0.2))) / (9 + 2 * 4 * 4) = 280.4 / 41
+    # y: (-3 * 9 + 9 * ((-4 - 0.2) + (-10 - 0.2))) / (9 + 2 * 9 * 4) = -156.6 / 81
+    np.testing.assert_allclose(mean, [280.4 / 41, -156.6 / 81])
+    np.testing.assert_allclose(var, [36 / 41, 81 / 81])
+
+
+def grid_posterior(prior_mean, prior_var, measurements, model, half_width=12.0, step=0.02):
+    axis_x = np.arange(prior_mean[0] - half_width, prior_mean[0] + half_width, step)
+    axis_y = np.arange(prior_mean[1] - half_width, prior_mean[1] + half_width, step)
+    grid = np.stack(np.meshgrid(axis_x, axis_y, indexing="ij"), -1).reshape(-1, 2)
+    log_density = model.log_likelihood(grid, measurements) - 0.5 * np.sum(
+        (grid - prior_mean) ** 2 / prior_var, axis=1
+    )
+    weights = np.exp(log_density - log_density.max())
+    weights /= weights.sum()
+    mean = weights @ grid
+    return mean, weights @ (grid - mean) ** 2
+
+
+def test_exact_variant_equals_grid_integration():
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 2.25])
+    measurements = np.array([[1.0, 0.5], [0.6, -0.2], [-3.0, 2.5], [4.0, -1.0]])
+    result = exact_posterior(prior_mean, prior_var, measurements, LIKELIHOOD)
+    mean, var = grid_posterior(prior_mean, prior_var, measurements, LIKELIHOOD)
+    # the grid's error: step 0.02 over a posterior of std ~0.6 (midpoint rule, far below 1e-4)
+    np.testing.assert_allclose(result.mean, mean, atol=1e-4)
+    np.testing.assert_allclose(result.var, var, rtol=1e-3)
+    assert result.pruned_mass < 1e-6
+
+
+def test_far_clutter_moves_the_exact_posterior_far_less_than_the_paper_variant():
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 4.0])
+    target = np.array([[0.5, 0.2], [-0.3, 0.4]])
+    with_clutter = np.vstack([target, [[30.0, 0.0]]])
+    exact_shift = np.abs(
+        exact_posterior(prior_mean, prior_var, with_clutter, LIKELIHOOD).mean
+        - exact_posterior(prior_mean, prior_var, target, LIKELIHOOD).mean
+    )
+    paper_shift = np.abs(
+        paper_posterior(prior_mean, prior_var, with_clutter, LIKELIHOOD)[0]
+        - paper_posterior(prior_mean, prior_var, target, LIKELIHOOD)[0]
+    )
+    assert paper_shift[0] > 5.0 and exact_shift[0] < 1e-3
+
+
+def test_hybrid_tracks_and_bounds_its_estimate():
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    for tracker_id in ("hybrid", "hybrid-paper"):
+        result = run_episode(env, make_tracker(tracker_id), seed=0)
+        assert (
+            np.all(np.isfinite(result.mean))
+            and np.all(result.var > 0)
+            and np.all(np.isfinite(result.ucb))
+        )
+        assert result.metrics()["nrmse_x"] < 0.1
+
+
+def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
+    observation, info = env.reset(seed=0)
+    tracker = HybridFilter(inputs="stgp")
+    tracker.reset(info["problem_spec"])
+    for _ in range(10):
+        estimate = tracker.update(observation)
+        np.testing.assert_array_equal(tracker.dgpt.estimate_, estimate.mean)
+        observation, *_ = env.step(estimate.mean)
+
+
+def test_turn_transition_tends_to_constant_velocity():
+    cv = turn_transition(0.0, 1.0)
+    np.testing.assert_array_equal(cv, [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]])
+    for omega in (1e-3, 1e-5):
+        np.testing.assert_allclose(turn_transition(omega, 1.0), cv, atol=2 * omega)
+    # a turn rotates the velocity by omega T
+    state = turn_transition(0.5, 1.0) @ np.array([0.0, 10.0, 0.0, 0.0])
+    np.testing.assert_allclose(state[[1, 3]], 10 * np.array([np.cos(0.5), np.sin(0.5)]))
+
+
+def cv_spec(clutter_rate=0.0):
+    sensors = np.array(
+        [[x, y] for x in range(0, 1001, 25) for y in range(0, 1001, 25)], dtype=float
+    )
+    return ProblemSpec(sensors, 50.0, 1.0, clutter_rate, 1.0, 1.0, 1000.0, "detecting", 60)
+
+
+def test_cpf_converges_on_a_constant_velocity_target():
+    rng = np.random.default_rng(3)
+    spec = cv_spec()
+    tracker = MultipleModelCPF()
+    tracker.reset(spec, seed=4)
+    errors = []
+    for t in range(60):
+        truth = np.array([200.0 + 12 * t, 300.0 + 5 * t])
+        z = truth + rng.normal(size=(4, 2))
+        k = 8
+        observation = {
+            "measurements": np.vstack([z, np.zeros((k - 4, 2))]),
+            "mask": np.r_[np.ones(4), np.zeros(k - 4)].astype(np.int8),
+            "sensor": np.r_[np.arange(4), -np.ones(k - 4)].astype(np.int64),
+            "t": t,
+        }
+        estimate = tracker.update(observation)
+        errors.append(estimate.mean - truth)
+        probabilities = tracker.mode_probabilities()
+        assert probabilities.sum() == pytest.approx(1.0) and np.all(probabilities >= 0)
+    final_rmse = np.sqrt(np.mean(np.array(errors[-20:]) ** 2))
+    assert final_rmse < 1.0  # sigma_z: four measurements of sigma 1 per step, and a CV prior
+    assert tracker.mode_probabilities()[0] > 0.5
+
+
+def test_cpf_turn_modes_gain_probability_in_an_s3_turn():
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=1.0)
+    observation, info = env.reset(seed=0)
+    tracker = make_tracker("cpf")
+    tracker.reset(info["problem_spec"], seed=0)
+    trajectory = env.unwrapped.trajectory_
+    turning = np.abs(trajectory.turn_rates()) > 0.1
+    in_turn, straight = [], []
+    truncated = False
+    while not truncated:
+        step = observation["t"]
+        estimate = tracker.update(observation)
+        turn_probability = 1.0 - tracker.mode_probabilities()[0]
+        detected = observation["mask"].sum() > 0
+        if 0 < step < len(turning) and detected:
+            # judge the mode after a few steps in the same regime
+            if turning[max(step - 4, 0) : step].all():
+                in_turn.append(turn_probability)
+            elif not turning[max(step - 4, 0) : step].any():
+                straight.append(turn_probability)
+        observation, _, _, truncated, _ = env.step(estimate.mean)
+    assert np.mean(in_turn) > np.mean(straight) + 0.2
+
+
+def test_cpf_without_measurements_and_same_seed():
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0)
+    a = run_episode(env, make_tracker("cpf"), seed=2)
+    b = run_episode(env, make_tracker("cpf"), seed=2)
+    np.testing.assert_array_equal(a.mean, b.mean)
+    assert np.all(np.isfinite(a.mean)) and np.any(a.n_detecting == 0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"n_particles": 0}, "n_particles"),
+        ({"mode_transition": MODE_TRANSITION * 1.1}, "row-stochastic"),
+        ({"mode_transition": np.ones((5, 4)) / 4}, "square"),
+        ({"initial_mode_probabilities": [1.0, 0, 0, 0]}, "probability"),
+        ({"resample_threshold": 0.0}, "resample_threshold"),
+        ({"acceleration_std": -1.0}, "acceleration_std"),
+    ],
+)
+def test_cpf_rejects_bad_arguments(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        MultipleModelCPF(**kwargs)
+
+
+def test_hybrid_rejects_an_unknown_variant():
+    with pytest.raises(ValueError, match="variant"):
+        HybridFilter(variant="approximate")

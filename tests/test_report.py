@@ -1,0 +1,78 @@
+"""Paper tables, tuned windows and the grid runner."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dgpt_gym import report, tuning
+from dgpt_gym.evaluation import evaluate_grid, run_seed
+
+
+def test_paper_values_are_transcribed():
+    paper = report.paper_nrmse()
+    assert len(paper) == 8 * 6 * 6  # Tables II-IX, 6 rows, 3 approaches x 2 axes
+    assert paper[("tgp", "S1", 1.0, 1.0, "gp", "x")] == (0.77, "Table II")
+    assert paper[("tgp", "S3", 2.0, 5.0, "dgpt-gpoe", "y")] == (3.27, "Table IV")
+    assert paper[("stgp", "S4", 4.0, 5.0, "dgpt-rbcm", "x")] == (2.64, "Table IX")
+
+
+def test_paper_table_cells_show_ours_paper_and_difference():
+    rows = [
+        {
+            "tracker": "dgpt-rbcm",
+            "scenario": "S1",
+            "noise_std": 1.0,
+            "clutter_rate": 1.0,
+            "nrmse_x": 0.0105,
+            "nrmse_y": 0.0090,
+        }
+    ]
+    text = report.paper_table_markdown(rows, "S1", "tgp")
+    assert "Table II" in text
+    assert "| 1 | 1 | - | - | 1.05 (0.93, +0.12) | 0.90 (0.95, -0.05) | - | - |" in text
+    summary = report.summary_against_paper(rows)
+    assert summary == {
+        "cells": 2,
+        "at_or_below_paper": 1,
+        "mean_ours": pytest.approx(0.975),
+        "mean_paper": pytest.approx(0.94),
+    }
+
+
+def test_tuned_windows_lookup():
+    windows = tuning.tuned_windows()
+    assert set(windows) >= {"gp", "dgpt-rbcm", "dgpt-gpoe"}
+    assert tuning.tuned_kwargs("dgpt-rbcm", "S2") == {"window": windows["dgpt-rbcm"]["S2"]}
+    assert tuning.tuned_kwargs("centroid", "S2") == {}
+
+
+def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
+    best, rows = tuning.tune_windows(
+        ["dgpt-rbcm"], ["S3"], windows=[2, 6], seeds=[1000], clutter_rates=[1.0], progress=False
+    )
+    scores = {row["window"]: row["nrmse"] for row in rows}
+    assert best == {"dgpt-rbcm": {"S3": min(scores, key=scores.get)}}
+    direct = run_seed(
+        "dgpt-rbcm", {"window": 6}, {"scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0}, 1000
+    )
+    assert scores[6] == pytest.approx(0.5 * (direct["nrmse_x"] + direct["nrmse_y"]))
+    path = tmp_path / "windows.json"
+    tuning.save_tuned_windows(best, rows, path)
+    assert json.loads(path.read_text())["windows"] == best
+
+
+def test_grid_on_two_processes_equals_one():
+    kwargs = dict(
+        trackers=["dgpt-gpoe", "centroid"],
+        scenarios=["S4"],
+        clutter_rates=[5.0],
+        runs=2,
+        progress=False,
+    )
+    serial = evaluate_grid(workers=1, **kwargs)
+    parallel = evaluate_grid(workers=2, **kwargs)
+    for a, b in zip(serial, parallel):
+        assert a["tracker"] == b["tracker"]
+        np.testing.assert_array_equal([a["nrmse_x"], a["nrmse_y"]], [b["nrmse_x"], b["nrmse_y"]])
+    assert serial[0]["window"] == tuning.tuned_windows()["dgpt-gpoe"]["S4"]
