@@ -6,8 +6,9 @@ For the measurements z_1..z_n of one step,
     p(Z | x)  proportional to  prod_j ( lambda_c / A_sen + lambda_T N(z_j; x, sigma_z^2 I) ),
 
 eq. (42), with the clutter density uniform over a sensing disc of area A_sen = pi r^2 and
-the rates and noise known (:class:`~dgpt_gym.problem.ProblemSpec`). Everything is computed
-in log space (log-sum-exp of the two terms), so hundreds of measurements do not underflow.
+the rates and noise known (:class:`~dgpt_gym.problem.ProblemSpec`). The product is a sum
+of log factors, so hundreds of measurements do not underflow; each factor is at least the
+clutter density (or, without clutter, computed in log space).
 """
 
 from __future__ import annotations
@@ -19,8 +20,6 @@ import numpy as np
 from dgpt_gym.problem import ProblemSpec
 
 __all__ = ["PoissonLikelihood"]
-
-LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 @dataclass(frozen=True)
@@ -54,12 +53,11 @@ class PoissonLikelihood:
         variance = self.noise_std**2
         offsets = positions[:, None, :] - measurements[None, :, :]
         squared = np.einsum("pnk,pnk->pn", offsets, offsets)
-        log_target = (
-            np.log(self.detection_rate) - LOG_2PI - np.log(variance) - 0.5 * squared / variance
-        )
+        peak = self.detection_rate / (2.0 * np.pi * variance)
         if self.clutter_rate == 0.0:
-            return log_target
-        return np.logaddexp(np.log(self.clutter_density), log_target)
+            return np.log(peak) - 0.5 * squared / variance
+        # every factor is at least the clutter density c > 0: no underflow in linear space
+        return np.log(self.clutter_density + peak * np.exp(-0.5 * squared / variance))
 
     def log_likelihood(self, positions: np.ndarray, measurements: np.ndarray) -> np.ndarray:
         """log p(Z | x_i) up to a constant, eq. (42), for positions (P, 2): shape (P,)."""

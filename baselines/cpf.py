@@ -181,7 +181,11 @@ class MultipleModelCPF(TrackerBase):
         uniform = rng.random(self.n_particles)
         self.modes_ = (uniform[:, None] > self.cumulative_transition_[self.modes_]).sum(axis=1)
         self.modes_ = np.minimum(self.modes_, self.turn_rates.size - 1)
-        self.particles_ = np.einsum("pij,pj->pi", self.transitions_[self.modes_], self.particles_)
+        moved = np.empty_like(self.particles_)
+        for mode, transition in enumerate(self.transitions_):  # five modes, not particles
+            chosen = self.modes_ == mode
+            moved[chosen] = self.particles_[chosen] @ transition.T
+        self.particles_ = moved
         noise = rng.normal(0.0, self.acceleration_std, (self.n_particles, 2))
         self.particles_[:, [0, 2]] += 0.5 * dt**2 * noise
         self.particles_[:, [1, 3]] += dt * noise

@@ -191,3 +191,71 @@ def windows_markdown() -> list[str]:
             ]
             lines.append(f"| {tracker} | {scenario} | " + " | ".join(cells) + " |")
     return lines + [""]
+
+
+HYBRID_COMPARISON_TRACKERS = ("gp", "dgpt-rbcm", "hybrid", "hybrid-paper", "cpf")
+
+
+def hybrid_comparison_markdown(rows: list[dict], command: str) -> str:
+    """The paper's Fig. 8 as a table: NRMSE and STD of the RMSE over runs per scenario and
+    tracker, with the paper's findings for comparison."""
+    trackers = [t for t in HYBRID_COMPARISON_TRACKERS if any(r["tracker"] == t for r in rows)]
+    scenarios = sorted({r["scenario"] for r in rows})
+    by_key = {(r["tracker"], r["scenario"]): r for r in rows}
+    runs = sorted({r["n_runs"] for r in rows})
+    lines = [
+        "## Hybrid filter and CPF (paper Fig. 8)",
+        "",
+        f"Command: `{command}` (sigma_z = 1, clutter rate 5, {', '.join(map(str, runs))} Monte Carlo"
+        " runs per cell). Cells: NRMSE X / Y in %, and the STD of the per-run RMSE X / Y in m.",
+        "",
+        "| tracker | " + " | ".join(f"{s} NRMSE % | {s} STD RMSE m" for s in scenarios) + " |",
+        "|---|" + "---|---|" * len(scenarios),
+    ]
+    for tracker in trackers:
+        cells = []
+        for scenario in scenarios:
+            row = by_key.get((tracker, scenario))
+            if row is None:
+                cells += ["-", "-"]
+                continue
+            cells.append(f"{100 * row['nrmse_x']:.2f} / {100 * row['nrmse_y']:.2f}")
+            cells.append(f"{row['rmse_std_x']:.2f} / {row['rmse_std_y']:.2f}")
+        lines.append(f"| {tracker} | " + " | ".join(cells) + " |")
+    return "\n".join(lines + ["", "![Fig. 8](figures/hybrid_comparison.png)", ""])
+
+
+def plot_hybrid_comparison(rows: list[dict], path: str | Path) -> Path:
+    """Bar charts of NRMSE and STD of RMSE per scenario, axis and tracker (paper Fig. 8)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    trackers = [t for t in HYBRID_COMPARISON_TRACKERS if any(r["tracker"] == t for r in rows)]
+    scenarios = sorted({r["scenario"] for r in rows})
+    by_key = {(r["tracker"], r["scenario"]): r for r in rows}
+    figure = Figure(figsize=(10, 6), dpi=70)
+    FigureCanvasAgg(figure)
+    panels = [
+        ("nrmse_x", "(a) NRMSE X, %", 100),
+        ("nrmse_y", "(b) NRMSE Y, %", 100),
+        ("rmse_std_x", "(c) STD of RMSE X, m", 1),
+        ("rmse_std_y", "(d) STD of RMSE Y, m", 1),
+    ]
+    width = 0.8 / len(trackers)
+    for index, (key, title, scale) in enumerate(panels):
+        axes = figure.add_subplot(2, 2, index + 1)
+        for offset, tracker in enumerate(trackers):
+            values = [
+                scale * by_key[(tracker, s)][key] if (tracker, s) in by_key else np.nan
+                for s in scenarios
+            ]
+            axes.bar(np.arange(len(scenarios)) + offset * width, values, width, label=tracker)
+        axes.set_xticks(np.arange(len(scenarios)) + 0.4 - width / 2, scenarios)
+        axes.set_title(title, fontsize=9)
+        if index == 0:
+            axes.legend(fontsize=7)
+    figure.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path)
+    return path

@@ -5,6 +5,10 @@
   (so both carry Gymnasium's default wrappers), resets included as episodes end. Goal <= 3.
 - dgpt-step: median time of one DGPT-RBCM update (TGP, window 10, both axes, steps with
   2-3 experts, warm-started learning). Goal <= 0.5 ms.
+- cpf: median CPF step with 2000 particles and ~10 measurements (S3, clutter rate 5). Goal
+  <= 1 ms.
+- hybrid: median hybrid-filter step (exact and paper variants) over the median step of the
+  DGPT it wraps, on the same episodes. Goal: at most 10 % over.
 - sklearn: full-GP log marginal likelihood + gradient versus scikit-learn's
   ``GaussianProcessRegressor.log_marginal_likelihood(theta, eval_gradient=True)`` on the same
   data and kernel, N = 1000, 2000, 4000. Goal: ratio <= 1.
@@ -27,9 +31,11 @@ import numpy as np
 
 import dgpt_gym
 from agents import gp
+from dgpt_gym.evaluation import run_episode
 from dgpt_gym.registry import make_tracker
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
+SECTIONS = ["env", "dgpt-step", "cpf-hybrid", "sklearn", "training-time"]
 
 
 def step_cost(env: gym.Env, action, n_steps: int, seed: int = 0) -> float:
@@ -80,6 +86,32 @@ def bench_dgpt_step(episodes: int) -> dict:
         "DGPT-RBCM step, 90th percentile (ms)": 1e3 * float(np.percentile(times, 90)),
         "steps measured": len(times),
     }
+
+
+def median_step_ms(tracker_id: str, episodes: int, scenario: str = "S3", **kwargs) -> float:
+    """Median ``update`` time of a registered tracker over episodes (clutter rate 5)."""
+    env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=5.0)
+    times = []
+    for seed in range(episodes):
+        times.extend(run_episode(env, make_tracker(tracker_id, **kwargs), seed).step_time)
+    return 1e3 * float(np.median(times))
+
+
+def bench_cpf_and_hybrid(episodes: int) -> dict:
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    counts = [
+        run_episode(env, make_tracker("centroid"), seed).n_measurements for seed in range(episodes)
+    ]
+    results = {
+        "measurements per step, median": float(np.median(np.concatenate(counts))),
+        "CPF step, 2000 particles, median (ms, goal <= 1)": median_step_ms("cpf", episodes),
+    }
+    dgpt = median_step_ms("dgpt-rbcm", episodes, window=3)
+    for variant in ("hybrid", "hybrid-paper"):
+        hybrid = median_step_ms(variant, episodes, window=3)
+        results[f"{variant} / DGPT-RBCM step (goal <= 1.10)"] = hybrid / dgpt
+    results["DGPT-RBCM step, window 3 (ms)"] = dgpt
+    return results
 
 
 def paper_function_data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -178,8 +210,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--only",
         nargs="+",
-        default=["env", "dgpt-step", "sklearn", "training-time"],
-        choices=["env", "dgpt-step", "sklearn", "training-time"],
+        default=SECTIONS,
+        choices=SECTIONS,
         help="sections to run",
     )
     parser.add_argument("--steps", type=int, default=20000, help="env steps per repeat")
@@ -206,6 +238,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n## DGPT-RBCM step (TGP, window 10, 2-3 experts, {args.episodes} episodes of S1)")
         for key, value in bench_dgpt_step(args.episodes).items():
             print(f"{key}: {value:.3f}" if isinstance(value, float) else f"{key}: {value}")
+    if "cpf-hybrid" in args.only:
+        print(f"\n## CPF and hybrid filter steps ({args.episodes} episodes of S3, clutter rate 5)")
+        for key, value in bench_cpf_and_hybrid(args.episodes).items():
+            print(f"{key}: {value:.3f}")
     if "sklearn" in args.only:
         print("\n## full-GP log marginal likelihood + gradient versus scikit-learn")
         for key, value in bench_sklearn([1000, 2000, 4000], repeats=3).items():

@@ -11,11 +11,17 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 import dgpt_gym  # registers the env and the trackers
 from dgpt_gym.evaluation import evaluate_grid, format_nrmse_table
 from dgpt_gym.plots import plot_scenarios
-from dgpt_gym.report import write_paper_tables
+from dgpt_gym.report import (
+    HYBRID_COMPARISON_TRACKERS,
+    hybrid_comparison_markdown,
+    plot_hybrid_comparison,
+    write_paper_tables,
+)
 from dgpt_gym.tuning import save_tuned_windows, tune_windows
 
 PAPER_TRACKERS = ["gp", "gp-stgp", "dgpt-rbcm", "dgpt-rbcm-stgp", "dgpt-gpoe", "dgpt-gpoe-stgp"]
@@ -80,6 +86,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "tables (ours beside the paper's) to MARKDOWN, rows to MARKDOWN.csv",
     )
     parser.add_argument(
+        "--hybrid-comparison",
+        metavar="MARKDOWN",
+        default=None,
+        help="run the paper's Fig. 8 comparison (sigma_z = 1, clutter rate 5; gp, dgpt-rbcm, "
+        "hybrid, hybrid-paper, cpf) with --runs runs, write its table to MARKDOWN and its "
+        "figure to figures/hybrid_comparison.png beside it",
+    )
+    parser.add_argument(
         "--tune-windows",
         action="store_true",
         help=f"grid-search the window of {PAPER_TRACKERS} on training seeds, "
@@ -103,6 +117,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(tracker, by_scenario)
             return 0
         trackers = PAPER_TRACKERS if args.paper_tables else args.trackers
+        if args.hybrid_comparison:
+            trackers = list(HYBRID_COMPARISON_TRACKERS)
+            args.noise_std, args.clutter_rates = [1.0], [5.0]
         rows = evaluate_grid(
             trackers,
             args.scenarios,
@@ -117,10 +134,13 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    command = "python scripts/evaluate.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.hybrid_comparison:
+        target = Path(args.hybrid_comparison)
+        figure = plot_hybrid_comparison(rows, target.parent / "figures" / "hybrid_comparison.png")
+        target.write_text(hybrid_comparison_markdown(rows, command))
+        print(f"wrote {target} and {figure}")
     if args.paper_tables:
-        command = "python scripts/evaluate.py " + " ".join(
-            argv if argv is not None else sys.argv[1:]
-        )
         write_paper_tables(rows, args.paper_tables, command)
         print(f"wrote {args.paper_tables} and {args.paper_tables}.csv")
     print(format_nrmse_table(rows))
