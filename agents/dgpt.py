@@ -253,16 +253,22 @@ class DGPT(TrackerBase):
             step=step + 1 if self.anytime_ucb else None,
         )
         self.n_experts_ = data.sensors.size
-        prior_next = self.set_estimate(estimate)
+        self.estimate_ = estimate
+        prior_next = self._predict_next()
         return Estimate(estimate.copy(), estimate_var, ucb, prior_next)
 
     def set_estimate(self, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Take ``estimate`` (2,) as this step's estimate and predict the next step from it:
-        the spatial input of STGP is the estimate (the hybrid filter feeds its posterior
-        back here). Returns and stores the aggregated next-step prediction (mean, var) and
-        each expert's, which gate the next step's measurements."""
-        data, fact, log_params, prior_var, residual_var = self._model
+        """Take ``estimate`` (2,) as this step's estimate (the hybrid filter feeds its
+        posterior back here) and return the next-step prediction (mean, var). With STGP the
+        estimate is the spatial input of that prediction, which is recomputed; with TGP it
+        does not depend on the estimate."""
         self.estimate_ = np.asarray(estimate, dtype=float).copy()
+        return self._predict_next() if self._spatial else self.prior_next_
+
+    def _predict_next(self) -> tuple[np.ndarray, np.ndarray]:
+        """The aggregated next-step prediction from ``estimate_`` (stored in ``prior_next_``)
+        and each expert's, which gate the next step's measurements."""
+        data, fact, log_params, prior_var, residual_var = self._model
         x_next = self._test_inputs(data, 1.0, self.estimate_)
         mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
         self.prior_next_ = self._aggregate(

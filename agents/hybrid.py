@@ -81,7 +81,9 @@ def exact_posterior(
 
     Expanding the product, every subset S of target-originated measurements contributes a
     Gaussian component (a Kalman update of the prior with the measurements in S) with weight
-    c^(n - |S|) lambda_T^|S| N(z_S; ...). The components are built one measurement at a time,
+    c^(n - |S|) lambda_T^|S| N(z_S; ...). Measurements whose target branch is below
+    ``prune_tolerance`` of the clutter branch under the prior predictive are skipped first
+    (their branch ratios are added to ``pruned_mass``). The components are built one measurement at a time,
     each splitting into "clutter" (weight x c) and "target" (Kalman update, weight x
     lambda_T x predictive density); after each measurement, components below
     ``prune_tolerance`` of the total weight are dropped (and at most ``max_components``
@@ -95,6 +97,24 @@ def exact_posterior(
     variances = np.asarray(prior_var, dtype=float)[None, :]
     log_weights = np.zeros(1)
     pruned = 0.0
+    # Pre-gate: a measurement whose target branch is already negligible against the prior
+    # predictive (ratio to the clutter branch below the tolerance) can only be clutter for
+    # every component; it multiplies all weights by the same c and is skipped. Its ratio is
+    # added to the reported pruned mass.
+    if likelihood.clutter_rate > 0 and measurements.shape[0]:
+        predictive = variances[0] + noise_var
+        log_ratio = (
+            log_rate
+            - log_clutter
+            - 0.5
+            * np.sum(
+                (measurements - means[0]) ** 2 / predictive + np.log(2.0 * np.pi * predictive),
+                axis=1,
+            )
+        )
+        negligible = log_ratio < np.log(prune_tolerance)
+        pruned = float(np.sum(np.exp(log_ratio[negligible])))
+        measurements = measurements[~negligible]
     for z in measurements:
         predictive_var = variances + noise_var
         residual = z - means
