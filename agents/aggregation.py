@@ -65,6 +65,15 @@ def entropy_weights(var: np.ndarray, prior_var: np.ndarray) -> np.ndarray:
     return 0.5 * (np.log(prior_var) - np.log(np.asarray(var, dtype=float)))
 
 
+def _expert_weights(method: str, var, prior_var, valid) -> np.ndarray:
+    """beta_i of each expert: eq. (11) for GPoE and RBCM, 1 for PoE and BCM, 0 when invalid."""
+    if method in ("gpoe", "rbcm"):
+        return np.where(valid, entropy_weights(var, prior_var), 0.0)
+    if method in ("poe", "bcm"):
+        return valid.astype(float)
+    raise ValueError(f"aggregation must be one of {list(AGGREGATIONS)}; got {method!r}")
+
+
 def aggregate(
     method: str,
     mean: np.ndarray,
@@ -76,12 +85,7 @@ def aggregate(
     RBCM (18)-(20). The prior mean is 0 (outputs are centred before the GP sees them)."""
     mean, var, prior_var, valid = _prepare(mean, var, prior_var, valid)
     precision_i = np.where(valid, 1.0 / var, 0.0)
-    if method in ("gpoe", "rbcm"):
-        beta = np.where(valid, entropy_weights(var, prior_var), 0.0)
-    elif method in ("poe", "bcm"):
-        beta = valid.astype(float)
-    else:
-        raise ValueError(f"aggregation must be one of {list(AGGREGATIONS)}; got {method!r}")
+    beta = _expert_weights(method, var, prior_var, valid)
     weights = beta * precision_i
     precision = weights.sum(axis=-1)
     prior_precision = 1.0 / prior_var[..., 0]
@@ -151,13 +155,7 @@ def ucb_half_width(
         gamma_one_step(n_experts, delta) if step is None else gamma_anytime(step, n_experts, delta)
     )
     gamma = np.asarray(gamma)[..., None]
-    if method in ("gpoe", "rbcm"):
-        beta = np.where(valid, entropy_weights(var, prior_var_expanded), 0.0)
-    elif method in ("poe", "bcm"):
-        beta = valid.astype(float)
-    else:
-        raise ValueError(f"aggregation must be one of {list(AGGREGATIONS)}; got {method!r}")
-    weights = beta / var
+    weights = _expert_weights(method, var, prior_var_expanded, valid) / var
     bound = convex_combination_bound(np.sqrt(var), gamma, weights)
     fallback = np.sqrt(gamma[..., 0] * prior_var_expanded[..., 0])
     return np.where(np.isfinite(bound), bound, fallback)

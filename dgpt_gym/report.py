@@ -196,12 +196,17 @@ def windows_markdown() -> list[str]:
 HYBRID_COMPARISON_TRACKERS = ("gp", "dgpt-rbcm", "hybrid", "hybrid-paper", "cpf")
 
 
-def hybrid_comparison_markdown(rows: list[dict], command: str) -> str:
-    """The paper's Fig. 8 as a table: NRMSE and STD of the RMSE over runs per scenario and
-    tracker, with the paper's findings for comparison."""
+def _comparison_layout(rows: list[dict]):
+    """Trackers of the comparison present in ``rows`` (in order), scenarios, rows by key."""
     trackers = [t for t in HYBRID_COMPARISON_TRACKERS if any(r["tracker"] == t for r in rows)]
     scenarios = sorted({r["scenario"] for r in rows})
-    by_key = {(r["tracker"], r["scenario"]): r for r in rows}
+    return trackers, scenarios, {(r["tracker"], r["scenario"]): r for r in rows}
+
+
+def hybrid_comparison_markdown(rows: list[dict], command: str) -> str:
+    """The paper's Fig. 8 as a table: NRMSE and STD of the RMSE over runs per scenario and
+    tracker (the paper prints only bars, so there are no values to set beside them)."""
+    trackers, scenarios, by_key = _comparison_layout(rows)
     runs = sorted({r["n_runs"] for r in rows})
     lines = [
         "## Hybrid filter and CPF (paper Fig. 8)",
@@ -230,9 +235,7 @@ def plot_hybrid_comparison(rows: list[dict], path: str | Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    trackers = [t for t in HYBRID_COMPARISON_TRACKERS if any(r["tracker"] == t for r in rows)]
-    scenarios = sorted({r["scenario"] for r in rows})
-    by_key = {(r["tracker"], r["scenario"]): r for r in rows}
+    trackers, scenarios, by_key = _comparison_layout(rows)
     figure = Figure(figsize=(10, 6), dpi=70)
     FigureCanvasAgg(figure)
     panels = [

@@ -76,3 +76,27 @@ def test_grid_on_two_processes_equals_one():
         assert a["tracker"] == b["tracker"]
         np.testing.assert_array_equal([a["nrmse_x"], a["nrmse_y"]], [b["nrmse_x"], b["nrmse_y"]])
     assert serial[0]["window"] == tuning.tuned_windows()["dgpt-gpoe"]["S4"]
+
+
+def test_hybrid_comparison_table_and_figure(tmp_path):
+    rows = [
+        {
+            "tracker": tracker,
+            "scenario": scenario,
+            "nrmse_x": 0.01 * k,
+            "nrmse_y": 0.02 * k,
+            "rmse_std_x": 1.5 * k,
+            "rmse_std_y": 2.5 * k,
+            "n_runs": 3,
+        }
+        for k, (tracker, scenario) in enumerate(
+            [("cpf", "S1"), ("hybrid", "S1"), ("hybrid", "S2")], start=1
+        )
+    ]
+    text = report.hybrid_comparison_markdown(rows, "cmd")
+    # trackers in the paper's order (hybrid before cpf); a missing cell is a dash
+    assert "| hybrid | 2.00 / 4.00 | 3.00 / 5.00 | 3.00 / 6.00 | 4.50 / 7.50 |" in text
+    assert "| cpf | 1.00 / 2.00 | 1.50 / 2.50 | - | - |" in text
+    assert text.index("| hybrid |") < text.index("| cpf |")
+    figure = report.plot_hybrid_comparison(rows, tmp_path / "figures" / "comparison.png")
+    assert figure.exists() and figure.stat().st_size > 1000
