@@ -27,7 +27,6 @@ __all__ = [
     "NumericalError",
     "TrainingData",
     "Factorization",
-    "n_params",
     "unpack",
     "se_kernel",
     "factorize",
@@ -45,11 +44,6 @@ _LAPACK_MIN_SIZE = 48
 
 class NumericalError(ArithmeticError):
     """A covariance matrix stayed indefinite after the largest jitter."""
-
-
-def n_params(d: int) -> int:
-    """Number of hyperparameters of a d-dimensional ARD squared-exponential kernel plus noise."""
-    return d + 2
 
 
 def unpack(log_params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

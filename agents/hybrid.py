@@ -177,10 +177,6 @@ class HybridFilter(TrackerBase):
         self.dgpt = DGPT(delta=delta, **dgpt_kwargs)
         self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{self.dgpt.inputs}"
 
-    @property
-    def window(self) -> int:
-        return self.dgpt.window
-
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
         self.dgpt.reset(spec, seed)

@@ -61,9 +61,9 @@ class ExpertData:
     """Training data of the experts for both axes.
 
     ``sensors`` (M,) the expert sensors (a single -1 for one pooled expert); ``X`` (2, M, n,
-    d) inputs, ``z`` (2, M, n) outputs minus the prior mean, ``mask`` (M, n); ``steps`` (M,
-    n) the step of every point. The prior mean of each axis is ``intercept + slope * tau``
-    at the time ``tau`` relative to the window's end (:meth:`prior_mean`).
+    d) inputs, ``z`` (2, M, n) outputs minus the prior mean, ``mask`` (M, n). The prior mean
+    of each axis is ``intercept + slope * tau`` at the time ``tau`` relative to the window's
+    end (:meth:`prior_mean`).
     """
 
     sensors: np.ndarray
@@ -73,7 +73,6 @@ class ExpertData:
     intercept: np.ndarray
     slope: np.ndarray
     trend_covariance: np.ndarray
-    steps: np.ndarray
 
     @property
     def n_points(self) -> int:
@@ -150,7 +149,7 @@ class SlidingWindow:
             X = np.stack([space, time], axis=-1)
         else:
             X = time[..., None]
-        return ExpertData(labels, X, z, mask, intercept, slope, trend_covariance, padded_steps)
+        return ExpertData(labels, X, z, mask, intercept, slope, trend_covariance)
 
 
 PRIOR_MEANS = ("linear", "window", "zero")
