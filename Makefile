@@ -17,7 +17,7 @@ $(VENV)/.core: pyproject.toml | $(BIN)/python
 
 $(VENV)/.dev: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[rl,dev]"
+	$(BIN)/python -m pip install --quiet -e ".[rl,cluster,dev]"
 	touch $(VENV)/.core $@
 
 evaluate: $(VENV)/.core

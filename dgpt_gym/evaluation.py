@@ -9,7 +9,6 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -129,22 +128,6 @@ def summarize_runs(rows: list[dict[str, float]]) -> dict[str, float]:
     return summary
 
 
-def run_seed(
-    tracker_id: str, tracker_kwargs: dict, env_kwargs: dict, seed: int
-) -> dict[str, float]:
-    """Metrics of one episode of a registered tracker (a picklable unit of work)."""
-    from dgpt_gym.registry import make_tracker
-
-    env = gym.make("DGPTrack-v0", **env_kwargs)
-    try:
-        return {
-            "seed": seed,
-            **run_episode(env, make_tracker(tracker_id, **tracker_kwargs), seed).metrics(),
-        }
-    finally:
-        env.close()
-
-
 def _single_threaded_blas() -> None:
     """Worker initializer: one BLAS thread per process. The GP matrices are tiny, and
     several processes each running a multi-threaded BLAS on the same cores spin against
@@ -152,87 +135,6 @@ def _single_threaded_blas() -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1)
-
-
-def map_units(
-    units: list[tuple], workers: int = 1, progress: bool = True, description: str = "runs"
-):
-    """``run_seed(*unit)`` for every unit, in order, on ``workers`` processes (1: in-process),
-    with a progress bar."""
-    bar = tqdm(total=len(units), desc=description, disable=not progress)
-    try:
-        if workers <= 1:
-            results = []
-            for unit in units:
-                results.append(run_seed(*unit))
-                bar.update()
-            return results
-        with ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas) as pool:
-            results = []
-            for result in pool.map(run_seed, *zip(*units), chunksize=4):
-                results.append(result)
-                bar.update()
-            return results
-    finally:
-        bar.close()
-
-
-def evaluate_grid(
-    trackers: Iterable[str],
-    scenarios: Iterable[str] = ("S1", "S2", "S3", "S4"),
-    noise_levels: Iterable[float] = (1.0,),
-    clutter_rates: Iterable[float] = (1.0, 5.0),
-    runs: int = 5,
-    first_seed: int = 0,
-    progress: bool = True,
-    workers: int = 1,
-    tuned_windows: bool = True,
-) -> list[dict]:
-    """Monte Carlo summary of registered trackers over a grid of environment settings.
-
-    Every (tracker, scenario, noise_std, clutter_rate) cell runs seeds
-    ``first_seed .. first_seed + runs - 1`` in ``DGPTrack-v0``; the same seeds give every
-    tracker the same measurements. With ``tuned_windows`` the GP trackers use the window
-    length tuned for the scenario (:mod:`dgpt_gym.tuning`). Returns one row per cell: the
-    cell's settings and :func:`summarize_runs` of its runs.
-    """
-    from dgpt_gym.registry import tracker_spec
-    from dgpt_gym.scenarios import get_scenario
-    from dgpt_gym.tuning import tuned_kwargs
-
-    trackers, scenarios = list(trackers), list(scenarios)
-    for name in trackers:
-        tracker_spec(name)
-    for name in scenarios:
-        get_scenario(name)
-    cells = [
-        (tracker, scenario, float(noise), float(clutter))
-        for scenario in scenarios
-        for noise in noise_levels
-        for clutter in clutter_rates
-        for tracker in trackers
-    ]
-    seeds = list(range(first_seed, first_seed + runs))
-    units = []
-    for tracker, scenario, noise, clutter in cells:
-        kwargs = tuned_kwargs(tracker, scenario) if tuned_windows else {}
-        env_kwargs = {"scenario": scenario, "noise_std": noise, "clutter_rate": clutter}
-        units += [(tracker, kwargs, env_kwargs, seed) for seed in seeds]
-    results = map_units(units, workers, progress)
-    rows = []
-    for index, (tracker, scenario, noise, clutter) in enumerate(cells):
-        per_run = results[index * runs : (index + 1) * runs]
-        rows.append(
-            {
-                "tracker": tracker,
-                "scenario": scenario,
-                "noise_std": noise,
-                "clutter_rate": clutter,
-                **(tuned_kwargs(tracker, scenario) if tuned_windows else {}),
-                **summarize_runs(per_run),
-            }
-        )
-    return rows
 
 
 def format_nrmse_table(rows: list[dict]) -> str:

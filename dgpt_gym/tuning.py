@@ -5,7 +5,7 @@ sliding windows in different trajectories are carefully tuned").
 the evaluation seeds 0 onwards) at sigma_z = 1 and both clutter rates, and picks for every
 tracker and scenario the window with the lowest NRMSE averaged over axes, clutter rates and
 seeds. The result is stored in ``tuned_windows.json`` beside this module and used by
-:func:`dgpt_gym.evaluation.evaluate_grid`. Regenerate it with
+:mod:`dgpt_gym.sweep`. Regenerate it with
 ``python scripts/evaluate.py --tune-windows``.
 """
 
@@ -63,18 +63,29 @@ def tune_windows(
 ) -> tuple[dict[str, dict[str, int]], list[dict]]:
     """Grid search of the window length; returns the best windows and every grid row
     (tracker, scenario, window, mean NRMSE)."""
-    from dgpt_gym.evaluation import map_units
+    from dgpt_gym.registry import tracker_spec
+    from dgpt_gym.sweep import RunUnit, run_units
 
     tracker_ids, scenarios = list(tracker_ids), list(scenarios)
     windows, seeds, clutter_rates = list(windows), list(seeds), list(clutter_rates)
     keys = [(t, s, w) for t in tracker_ids for s in scenarios for w in windows]
     units = [
-        (t, {"window": w}, {"scenario": s, "noise_std": noise_std, "clutter_rate": c}, seed)
+        RunUnit(
+            t,
+            tracker_spec(t).entry_point,
+            {**tracker_spec(t).kwargs, "window": w},
+            {"scenario": s, "noise_std": float(noise_std), "clutter_rate": float(c)},
+            seed,
+        )
         for t, s, w in keys
         for c in clutter_rates
         for seed in seeds
     ]
-    results = map_units(units, workers, progress, description="window grid")
+    outcomes = run_units(units, workers, progress)
+    failed = [o["error"] for o in outcomes if o["status"] != "ok"]
+    if failed:
+        raise RuntimeError(f"{len(failed)} runs of the window search failed, e.g. {failed[0]}")
+    results = [o["metrics"] for o in outcomes]
     per_key = len(clutter_rates) * len(seeds)
     rows, best = [], {}
     for index, (tracker, scenario, window) in enumerate(keys):

@@ -32,6 +32,7 @@ import numpy as np
 import dgpt_gym
 from agents import gp
 from dgpt_gym.evaluation import run_episode
+from dgpt_gym.plots import plot_training_time
 from dgpt_gym.registry import make_tracker
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -178,31 +179,11 @@ def bench_training_time(
 
 
 def write_training_time(rows: list[dict]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     with (DOCS / "training_time.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=["N", "M", "seconds"])
         writer.writeheader()
         writer.writerows(rows)
-    figure, axes = plt.subplots(figsize=(6, 4), dpi=80)
-    for m in sorted({row["M"] for row in rows}):
-        points = [(row["N"], row["seconds"]) for row in rows if row["M"] == m]
-        label = "full GP" if m == 1 else f"DGP, M = {m}"
-        axes.plot(*zip(*points), marker="o", label=label)
-    axes.set(
-        xscale="log",
-        yscale="log",
-        xlabel="training data N",
-        ylabel="log likelihood + gradient (s)",
-        title="Training time (paper Fig. 2): f(x) = 5 x1^2 + sin(12 x2)",
-    )
-    axes.legend()
-    figure.tight_layout()
-    (DOCS / "figures").mkdir(parents=True, exist_ok=True)
-    figure.savefig(DOCS / "figures" / "training_time.png")
+    plot_training_time(rows, DOCS / "figures" / "training_time.png")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,9 +1,11 @@
 #!/usr/bin/env python
-"""Baseline evaluation: Monte Carlo NRMSE of registered trackers on the paper's scenarios.
+"""Baseline evaluation: Monte Carlo runs of registered trackers on the paper's scenarios.
 
-With no options it runs the quick grid (all four scenarios, clutter rates 1 and 5,
-sigma_z = 1, a few runs of the standard GP, DGPT-RBCM and DGPT-GPoE) and prints a Markdown
-table of NRMSE per scenario and axis.
+With no options it runs the quick grid (S1-S4, clutter rates 1 and 5, sigma_z = 1, 10 runs of
+the standard GP, DGPT-RBCM, DGPT-GPoE, the hybrid filter and the CPF; about two minutes on 2
+cores) and prints a table of NRMSE per cell. --paper runs the paper's full grid. Every
+finished run is stored at once in OUT/results.sqlite: re-running the same command resumes
+an interrupted sweep. The tables and figures are then regenerated from the database.
 """
 
 from __future__ import annotations
@@ -11,139 +13,205 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import dgpt_gym  # registers the env and the trackers
-from dgpt_gym.evaluation import evaluate_grid, format_nrmse_table
-from dgpt_gym.plots import plot_scenarios
-from dgpt_gym.report import (
-    HYBRID_COMPARISON_TRACKERS,
-    hybrid_comparison_markdown,
-    plot_hybrid_comparison,
-    write_paper_tables,
+from dgpt_gym.evaluation import format_nrmse_table
+from dgpt_gym.outputs import write_outputs
+from dgpt_gym.registry import tracker_spec
+from dgpt_gym.sweep import (
+    PAPER_GP_TRACKERS,
+    PAPER_SWEEP,
+    QUICK_SWEEP,
+    Grid,
+    run_sweep,
+    summarize_store,
 )
 from dgpt_gym.tuning import save_tuned_windows, tune_windows
 
-PAPER_TRACKERS = ["gp", "gp-stgp", "dgpt-rbcm", "dgpt-rbcm-stgp", "dgpt-gpoe", "dgpt-gpoe-stgp"]
+ROOT = Path(__file__).resolve().parents[1]
+QUICK = QUICK_SWEEP[0]
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    grid = parser.add_argument_group("the grid (ignored with --paper)")
+    grid.add_argument(
         "--trackers",
         nargs="+",
-        default=["gp", "dgpt-rbcm", "dgpt-gpoe"],
-        help=f"registered tracker ids (default: gp dgpt-rbcm dgpt-gpoe); known: {dgpt_gym.tracker_ids()}",
+        default=list(QUICK.trackers),
+        metavar="ID",
+        help=f"registered tracker ids (default: {' '.join(QUICK.trackers)}); "
+        f"known: {' '.join(dgpt_gym.tracker_ids())}",
     )
-    parser.add_argument(
-        "--scenarios",
+    grid.add_argument(
+        "--inputs",
         nargs="+",
-        default=["S1", "S2", "S3", "S4"],
-        help="scenarios S1..S4 (default: all)",
+        choices=["tgp", "stgp"],
+        default=["tgp"],
+        help="input types of the GP trackers: tgp runs the ids as given, stgp their "
+        "'-stgp' variants (default: tgp)",
     )
-    parser.add_argument(
+    grid.add_argument(
+        "--scenarios", nargs="+", default=list(QUICK.scenarios), help="S1..S4 (default: all)"
+    )
+    grid.add_argument(
         "--noise-std",
         nargs="+",
         type=float,
-        default=[1.0],
-        help="sigma_z levels, m (default: 1; the paper: 1 2 4)",
+        default=list(QUICK.noise_levels),
+        help="sigma_z levels, m (default: 1; the paper's: 1 2 4)",
     )
-    parser.add_argument(
+    grid.add_argument(
         "--clutter-rates",
         nargs="+",
         type=float,
-        default=[1.0, 5.0],
+        default=list(QUICK.clutter_rates),
         help="clutter rates lambda_c (default: 1 5)",
     )
+    grid.add_argument(
+        "--runs",
+        type=int,
+        default=None,
+        help="Monte Carlo runs per cell (default: 10, with --paper 100; this option applies "
+        "to --paper too)",
+    )
+    grid.add_argument(
+        "--no-tuned-windows",
+        action="store_true",
+        help="use the trackers' default window instead of the one tuned per scenario",
+    )
     parser.add_argument(
-        "--runs", type=int, default=5, help="Monte Carlo runs per cell (default: 5)"
+        "--paper",
+        action="store_true",
+        help="the paper's full grid: S1-S4, sigma_z 1 2 4, clutter 1 5, standard GP, "
+        "DGPT-RBCM and DGPT-GPoE with TGP and STGP inputs, plus the hybrid filter (both "
+        "variants) and the CPF on the Fig. 8 cell (sigma_z 1, clutter 5); 100 runs each",
     )
     parser.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder holding results.sqlite (default: results/quick, or results/paper "
+        "with --paper)",
+    )
+    parser.add_argument(
+        "--report-dir",
+        type=Path,
+        default=None,
+        help="folder for the tables and figures (default: OUT)",
+    )
     parser.add_argument(
         "--workers",
         type=int,
         default=os.cpu_count() or 1,
-        help="worker processes (default: all cores)",
+        help="local worker processes (default: all cores; 1 runs in this process)",
     )
     parser.add_argument(
-        "--no-tuned-windows",
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run on the Dask cluster of this scheduler (e.g. tcp://10.0.0.5:8786) instead of "
+        "local processes; needs the 'cluster' extra",
+    )
+    parser.add_argument(
+        "--report-only",
         action="store_true",
-        help="use the trackers' default window instead of the per-scenario tuned one",
+        help="regenerate the tables and figures from the database without running anything",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument(
-        "--plot-scenarios",
-        metavar="PNG",
-        default=None,
-        help="write the trajectories figure (paper Fig. 3) to PNG and exit",
-    )
-    parser.add_argument(
-        "--paper-tables",
-        metavar="MARKDOWN",
-        default=None,
-        help="run the grid of the paper's Tables II-IX for the given --noise-std, "
-        "--clutter-rates and --runs with the six GP trackers and write the "
-        "tables (ours beside the paper's) to MARKDOWN, rows to MARKDOWN.csv",
-    )
-    parser.add_argument(
-        "--hybrid-comparison",
-        metavar="MARKDOWN",
-        default=None,
-        help="run the paper's Fig. 8 comparison (sigma_z = 1, clutter rate 5; gp, dgpt-rbcm, "
-        "hybrid, hybrid-paper, cpf) with --runs runs, write its table to MARKDOWN and its "
-        "figure to figures/hybrid_comparison.png beside it",
-    )
-    parser.add_argument(
         "--tune-windows",
         action="store_true",
-        help=f"grid-search the window of {PAPER_TRACKERS} on training seeds, "
+        help=f"grid-search the window of {' '.join(PAPER_GP_TRACKERS)} on training seeds, "
         "rewrite dgpt_gym/tuned_windows.json and exit",
     )
     return parser.parse_args(argv)
 
 
+def with_inputs(trackers: list[str], inputs: list[str]) -> list[str]:
+    """The tracker ids for the requested input types ('-stgp' variants for stgp)."""
+    ids = []
+    for tracker in trackers:
+        tracker_spec(tracker)  # unknown ids fail here, with the list of known ones
+        base = tracker.removesuffix("-stgp")
+        for kind in inputs:
+            name = base if kind == "tgp" else f"{base}-stgp"
+            if name not in dgpt_gym.tracker_ids():
+                raise ValueError(f"tracker {tracker!r} has no {kind.upper()} variant {name!r}")
+            ids.append(name)
+    return list(dict.fromkeys(ids))
+
+
+def build_grids(args: argparse.Namespace) -> list[Grid]:
+    if args.paper:
+        runs = {} if args.runs is None else {"runs": args.runs}
+        return [replace(grid, first_seed=args.seed, **runs) for grid in PAPER_SWEEP]
+    return [
+        Grid(
+            trackers=tuple(with_inputs(args.trackers, args.inputs)),
+            scenarios=tuple(args.scenarios),
+            noise_levels=tuple(args.noise_std),
+            clutter_rates=tuple(args.clutter_rates),
+            runs=QUICK.runs if args.runs is None else args.runs,
+            first_seed=args.seed,
+            tuned_windows=not args.no_tuned_windows,
+        )
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    if args.plot_scenarios:
-        print(f"wrote {plot_scenarios(args.plot_scenarios)}")
-        return 0
+    command = "python scripts/evaluate.py " + " ".join(argv if argv is not None else sys.argv[1:])
     try:
         if args.tune_windows:
             best, rows = tune_windows(
-                PAPER_TRACKERS, args.scenarios, workers=args.workers, progress=not args.no_progress
+                PAPER_GP_TRACKERS,
+                args.scenarios,
+                workers=args.workers,
+                progress=not args.no_progress,
             )
             save_tuned_windows(best, rows)
             for tracker, by_scenario in best.items():
                 print(tracker, by_scenario)
             return 0
-        trackers = PAPER_TRACKERS if args.paper_tables else args.trackers
-        if args.hybrid_comparison:
-            trackers = list(HYBRID_COMPARISON_TRACKERS)
-            args.noise_std, args.clutter_rates = [1.0], [5.0]
-        rows = evaluate_grid(
-            trackers,
-            args.scenarios,
-            args.noise_std,
-            args.clutter_rates,
-            runs=args.runs,
-            first_seed=args.seed,
-            progress=not args.no_progress,
-            workers=args.workers,
-            tuned_windows=not args.no_tuned_windows,
-        )
+        grids = build_grids(args)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    command = "python scripts/evaluate.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    if args.hybrid_comparison:
-        target = Path(args.hybrid_comparison)
-        figure = plot_hybrid_comparison(rows, target.parent / "figures" / "hybrid_comparison.png")
-        target.write_text(hybrid_comparison_markdown(rows, command))
-        print(f"wrote {target} and {figure}")
-    if args.paper_tables:
-        write_paper_tables(rows, args.paper_tables, command)
-        print(f"wrote {args.paper_tables} and {args.paper_tables}.csv")
-    print(format_nrmse_table(rows))
+    out = args.out or Path("results") / ("paper" if args.paper else "quick")
+    if not args.report_only:
+        try:
+            sweep = run_sweep(
+                grids, out, args.workers, args.scheduler, progress=not args.no_progress
+            )
+        except KeyboardInterrupt:
+            print(
+                f"\ninterrupted: every finished run is in {out}/results.sqlite; "
+                "run the same command again to resume",
+                file=sys.stderr,
+            )
+            return 130
+        print(
+            f"{sweep.total} runs: {sweep.already_finished} already in {out}/results.sqlite, "
+            f"{sweep.ran} run now, {sweep.failed} failed"
+        )
+        for error in sweep.errors:
+            print(f"  failed: {error}")
+    try:
+        written = write_outputs(
+            grids, out, args.report_dir, command.strip(), ROOT / "docs" / "training_time.csv"
+        )
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    summaries, failures = summarize_store(grids, out)
+    print(format_nrmse_table(summaries))
+    print(f"{len(failures)} failed runs; wrote {written[0]} and {len(written) - 1} more files")
     return 0
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from baselines.centroid import GatedCentroidTracker, weighted_centroid
 from dgpt_gym import make_tracker, register_tracker, tracker_ids
-from dgpt_gym.evaluation import evaluate_grid, run_episode, run_monte_carlo, summarize_runs
+from dgpt_gym.evaluation import run_episode, run_monte_carlo, summarize_runs
 
 
 @pytest.mark.parametrize("scenario", ["S1", "S2", "S3", "S4"])
@@ -97,16 +97,6 @@ def test_monte_carlo_summary():
     assert summary["nrmse_x"] == pytest.approx(np.mean([row["nrmse_x"] for row in rows]))
     assert summary["rmse_std_y"] == pytest.approx(np.std([row["rmse_y"] for row in rows], ddof=1))
     assert np.isnan(summary["ucb_coverage_x"])
-
-
-def test_evaluate_grid_rows_equal_direct_runs():
-    rows = evaluate_grid(["centroid"], ["S2"], [2.0], [1.0], runs=2, first_seed=3, progress=False)
-    assert len(rows) == 1
-    env = gym.make("DGPTrack-v0", scenario="S2", noise_std=2.0, clutter_rate=1.0)
-    direct = [
-        run_episode(env, make_tracker("centroid"), seed).metrics()["nrmse_x"] for seed in (3, 4)
-    ]
-    assert rows[0]["nrmse_x"] == pytest.approx(np.mean(direct), rel=1e-12)
 
 
 def test_registry():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dgpt_gym import report, tuning
-from dgpt_gym.evaluation import evaluate_grid, run_seed
+from dgpt_gym.sweep import Grid, RunUnit, run_unit, run_units
 
 
 def test_paper_values_are_transcribed():
@@ -53,29 +53,29 @@ def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
     )
     scores = {row["window"]: row["nrmse"] for row in rows}
     assert best == {"dgpt-rbcm": {"S3": min(scores, key=scores.get)}}
-    direct = run_seed(
-        "dgpt-rbcm", {"window": 6}, {"scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0}, 1000
+    env_kwargs = {"scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0}
+    unit = RunUnit(
+        "dgpt-rbcm", "agents.dgpt:DGPT", {"aggregation": "rbcm", "window": 6}, env_kwargs, 1000
     )
+    direct = run_unit(unit)["metrics"]
     assert scores[6] == pytest.approx(0.5 * (direct["nrmse_x"] + direct["nrmse_y"]))
     path = tmp_path / "windows.json"
     tuning.save_tuned_windows(best, rows, path)
     assert json.loads(path.read_text())["windows"] == best
 
 
-def test_grid_on_two_processes_equals_one():
-    kwargs = dict(
-        trackers=["dgpt-gpoe", "centroid"],
-        scenarios=["S4"],
-        clutter_rates=[5.0],
-        runs=2,
-        progress=False,
-    )
-    serial = evaluate_grid(workers=1, **kwargs)
-    parallel = evaluate_grid(workers=2, **kwargs)
+def test_units_on_two_processes_equal_one():
+    grid = Grid(trackers=("dgpt-gpoe", "centroid"), scenarios=("S4",), clutter_rates=(5.0,), runs=2)
+    units = grid.units()
+    serial = run_units(units, workers=1, progress=False)
+    parallel = run_units(units, workers=2, progress=False)
     for a, b in zip(serial, parallel):
-        assert a["tracker"] == b["tracker"]
-        np.testing.assert_array_equal([a["nrmse_x"], a["nrmse_y"]], [b["nrmse_x"], b["nrmse_y"]])
-    assert serial[0]["window"] == tuning.tuned_windows()["dgpt-gpoe"]["S4"]
+        assert a["status"] == b["status"] == "ok"
+        np.testing.assert_array_equal(
+            [a["metrics"]["nrmse_x"], a["metrics"]["nrmse_y"]],
+            [b["metrics"]["nrmse_x"], b["metrics"]["nrmse_y"]],
+        )
+    assert units[0].tracker_kwargs["window"] == tuning.tuned_windows()["dgpt-gpoe"]["S4"]
 
 
 def test_hybrid_comparison_table_and_figure(tmp_path):

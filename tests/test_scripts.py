@@ -17,9 +17,11 @@ def run_script(name, *args):
     )
 
 
-def test_evaluate_prints_the_nrmse_table():
+def test_evaluate_prints_the_nrmse_table(tmp_path):
     result = run_script(
         "evaluate.py",
+        "--out",
+        str(tmp_path),
         "--trackers",
         "centroid",
         "--scenarios",
@@ -39,6 +41,19 @@ def test_evaluate_prints_the_nrmse_table():
     )
     assert [row[0] for row in rows] == ["S1", "S4"]
     assert all(0 < float(value) < 100 for row in rows for value in row[1:])
+    assert "0 failed runs" in result.stdout and (tmp_path / "results.md").exists()
+
+
+def test_evaluate_help_documents_every_option():
+    result = run_script("evaluate.py", "--help")
+    assert result.returncode == 0
+    for option in ("--paper", "--scheduler", "--out", "--runs", "--inputs", "--workers", "--seed"):
+        assert option in result.stdout
+
+
+def test_evaluate_stgp_inputs_need_a_variant():
+    result = run_script("evaluate.py", "--trackers", "cpf", "--inputs", "stgp")
+    assert result.returncode == 2 and "no STGP variant" in result.stderr
 
 
 def test_evaluate_rejects_unknown_names_with_the_valid_ones():

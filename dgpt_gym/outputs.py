@@ -1,0 +1,290 @@
+"""Every table and figure of an evaluation sweep, regenerated from its results store.
+
+:func:`write_outputs` reads the finished runs of a sweep from ``out/results.sqlite`` and
+writes, to the report folder, what the sweep's runs allow:
+
+| file | content | paper |
+|---|---|---|
+| ``results.md`` | headline against the paper, NRMSE per tracker and scenario, failures, timings, links | |
+| ``results_cells.csv`` | every cell's summary (means over runs, STD of RMSE) | |
+| ``results_tables.md`` (+ ``.csv``) | NRMSE beside the paper's, laid out like the paper | Tables II-IX |
+| ``results_hybrid.md``, ``figures/hybrid_comparison.png`` | NRMSE and STD of RMSE bars at sigma_z = 1, clutter 5 | Fig. 8 |
+| ``results_uncertainty.md``, ``figures/ucb_vs_ci.png`` | UCB and 3-sigma coverage and width; one S1 run | Figs. 4-7, Sec. VII-G |
+| ``figures/scenarios.png`` | trajectories over the sensor field | Fig. 3 |
+| ``figures/training_time.png`` | DGP training time (from the benchmark's CSV) | Fig. 2 |
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from dgpt_gym import report
+from dgpt_gym.plots import plot_scenarios, plot_training_time, plot_ucb_vs_ci, read_training_time
+from dgpt_gym.sweep import PAPER_GP_TRACKERS, Grid, summarize_store, sweep_units
+
+__all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_UCB_GAIN"]
+
+PAPER_UCB_GAIN = {"x": 88.0, "y": 42.0}
+"""Sec. VII-G: the UCB covers the truth 88 % (X) and 42 % (Y) more often than the CI."""
+
+TIME_COLUMNS = ("step_time_ms",)
+"""Summary columns that are wall-clock measurements: they vary between identical runs."""
+
+
+def write_cells_csv(summaries: list[dict], path: Path) -> Path:
+    """One CSV row per cell: its settings and :func:`summarize_runs` of its runs."""
+    keys = list(dict.fromkeys(key for row in summaries for key in row))
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(summaries)
+    return path
+
+
+def _percent_pair(row: dict, key: str) -> str:
+    return f"{100 * row[f'{key}_x']:.0f} / {100 * row[f'{key}_y']:.0f}"
+
+
+def ucb_gain(rows: list[dict]) -> dict[str, float]:
+    """Per axis, how much more often the UCB covers the truth than the CI, in percent of the
+    CI's coverage, over the mean coverages of ``rows`` (the paper's 88 % / 42 %)."""
+    gains = {}
+    for axis in "xy":
+        ucb = np.mean([row[f"ucb_coverage_{axis}"] for row in rows])
+        ci = np.mean([row[f"ci_coverage_{axis}"] for row in rows])
+        gains[axis] = float(100 * (ucb - ci) / ci) if ci > 0 else float("inf")
+    return gains
+
+
+def uncertainty_markdown(summaries: list[dict], command: str, figure: str | None) -> str:
+    """Sec. VII-G as tables: coverage of the truth by the UCB and by the 3-sigma CI, and
+    their mean full widths, per cell of the trackers that give a UCB."""
+    rows = [row for row in summaries if np.isfinite(row.get("ucb_coverage_x", np.nan))]
+    lines = [
+        "## UCB against the confidence interval (paper Sec. VII-G, Figs. 4-7)",
+        "",
+        f"Command: `{command}`. Coverage: share of steps whose band (estimate +- UCB half-width,"
+        " or +- 3 sigma) contains the true coordinate, mean over runs; width: mean full width"
+        " (2 x half-width), m. The paper reports the UCB covering the truth"
+        f" {PAPER_UCB_GAIN['x']:.0f} % (X) and {PAPER_UCB_GAIN['y']:.0f} % (Y) more often than"
+        " the CI; the gain column is (UCB coverage - CI coverage) / CI coverage.",
+        "",
+        "| tracker | coverage gain X / Y % (paper 88 / 42) | UCB coverage X / Y % | CI coverage X / Y % | UCB width X / Y m | CI width X / Y m | cells |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for tracker in dict.fromkeys(row["tracker"] for row in rows):
+        mine = [row for row in rows if row["tracker"] == tracker]
+        mean = {
+            key: np.mean([row[key] for row in mine])
+            for key in mine[0]
+            if key.endswith(("_x", "_y")) and isinstance(mine[0][key], float)
+        }
+        gain = ucb_gain(mine)
+        lines.append(
+            f"| {tracker} | {gain['x']:+.0f} / {gain['y']:+.0f} | {_percent_pair(mean, 'ucb_coverage')} | "
+            f"{_percent_pair(mean, 'ci_coverage')} | {mean['ucb_width_x']:.1f} / {mean['ucb_width_y']:.1f} | "
+            f"{mean['ci_width_x']:.1f} / {mean['ci_width_y']:.1f} | {len(mine)} |"
+        )
+    lines += [
+        "",
+        "Per cell:",
+        "",
+        "| tracker | scenario | noise std | clutter | UCB coverage X / Y % | CI coverage X / Y % | UCB width X / Y m | CI width X / Y m | runs |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['tracker']} | {row['scenario']} | {row['noise_std']:g} | {row['clutter_rate']:g} | "
+            f"{_percent_pair(row, 'ucb_coverage')} | {_percent_pair(row, 'ci_coverage')} | "
+            f"{row['ucb_width_x']:.1f} / {row['ucb_width_y']:.1f} | "
+            f"{row['ci_width_x']:.1f} / {row['ci_width_y']:.1f} | {row['n_runs']} |"
+        )
+    if figure:
+        lines += ["", f"![Figs. 4-7]({figure})"]
+    return "\n".join(lines + [""])
+
+
+def nrmse_by_scenario_markdown(summaries: list[dict]) -> str:
+    """Mean NRMSE (both axes, every noise level and clutter rate) per tracker and scenario."""
+    scenarios = sorted({row["scenario"] for row in summaries})
+    lines = [
+        "| tracker | " + " | ".join(scenarios) + " |",
+        "|---|" + "---|" * len(scenarios),
+    ]
+    for tracker in dict.fromkeys(row["tracker"] for row in summaries):
+        cells = []
+        for scenario in scenarios:
+            values = [
+                0.5 * (row["nrmse_x"] + row["nrmse_y"])
+                for row in summaries
+                if row["tracker"] == tracker and row["scenario"] == scenario
+            ]
+            cells.append(f"{100 * np.mean(values):.2f}" if values else "-")
+        lines.append(f"| {tracker} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def paper_comparison_markdown(summaries: list[dict]) -> list[str]:
+    """Headline against Tables II-IX, overall and per scenario and clutter rate."""
+    overall = report.summary_against_paper(summaries)
+    if not overall["cells"]:
+        return []
+    lines = [
+        f"**{overall['at_or_below_paper']} of {overall['cells']} cells of Tables II-IX are at or"
+        f" below the paper's NRMSE; mean NRMSE {overall['mean_ours']:.2f} % against the"
+        f" paper's {overall['mean_paper']:.2f} %.**",
+        "",
+        "| scenario | clutter rate | ours % | paper % | cells at or below the paper |",
+        "|---|---|---|---|---|",
+    ]
+    for scenario in sorted({row["scenario"] for row in summaries}):
+        for clutter in sorted({row["clutter_rate"] for row in summaries}):
+            part = report.summary_against_paper(
+                [r for r in summaries if r["scenario"] == scenario and r["clutter_rate"] == clutter]
+            )
+            if part["cells"]:
+                lines.append(
+                    f"| {scenario} | {clutter:g} | {part['mean_ours']:.2f} | {part['mean_paper']:.2f}"
+                    f" | {part['at_or_below_paper']} / {part['cells']} |"
+                )
+    return lines + [""]
+
+
+def results_markdown(
+    summaries: list[dict], failures: list[dict], total_units: int, command: str, links: list[str]
+) -> str:
+    """``results.md``: what the sweep measured, in one page."""
+    from dgpt_gym import __version__
+
+    finished = int(sum(row["n_runs"] for row in summaries))
+    lines = [
+        "# Results",
+        "",
+        f"Generated from the results database by `{command}` (dgpt-gym {__version__});"
+        " do not edit by hand, re-run the command.",
+        "",
+        f"Runs: {finished} finished of {total_units}; **{len(failures)} failed**.",
+        "",
+    ]
+    if failures:
+        lines += [
+            "| tracker | scenario | noise std | clutter | seed | error |",
+            "|---|---|---|---|---|---|",
+        ]
+        for row in failures[:20]:
+            lines.append(
+                f"| {row['tracker']} | {row['scenario']} | {row['noise_std']:g} | "
+                f"{row['clutter_rate']:g} | {row['seed']} | {row['error']} |"
+            )
+        lines.append("")
+    lines += paper_comparison_markdown(summaries)
+    lines += [
+        "## Mean NRMSE (%) per tracker and scenario",
+        "",
+        "Mean over both axes and every noise level and clutter rate of the sweep.",
+        "",
+        nrmse_by_scenario_markdown(summaries),
+        "",
+        "## Tracker step time",
+        "",
+        "| tracker | median step time (ms), mean over runs |",
+        "|---|---|",
+    ]
+    for tracker in dict.fromkeys(row["tracker"] for row in summaries):
+        times = [row["step_time_ms"] for row in summaries if row["tracker"] == tracker]
+        lines.append(f"| {tracker} | {np.mean(times):.2f} |")
+    lines += ["", "## Files", ""] + [f"- {link}" for link in links]
+    return "\n".join(lines + [""])
+
+
+def _figure_run(grids: list[Grid], summaries: list[dict]):
+    """The unit of Figs. 4-7: DGPT-RBCM (else the first tracker with a UCB) on S1 (else the
+    first scenario), the lowest noise level and clutter rate, the first seed."""
+    with_ucb = [row for row in summaries if np.isfinite(row.get("ucb_coverage_x", np.nan))]
+    if not with_ucb:
+        return None
+    trackers = [row["tracker"] for row in with_ucb]
+    tracker = "dgpt-rbcm" if "dgpt-rbcm" in trackers else trackers[0]
+    units = [unit for unit in sweep_units(grids) if unit.tracker == tracker]
+    scenarios = {unit.env_kwargs["scenario"] for unit in units}
+    scenario = "S1" if "S1" in scenarios else sorted(scenarios)[0]
+    units = [unit for unit in units if unit.env_kwargs["scenario"] == scenario]
+    return min(
+        units,
+        key=lambda u: (u.env_kwargs["noise_std"], u.env_kwargs["clutter_rate"], u.seed),
+    )
+
+
+def write_outputs(
+    grids: list[Grid],
+    out: str | Path,
+    report_dir: str | Path | None = None,
+    command: str = "",
+    training_time_csv: str | Path | None = None,
+) -> list[Path]:
+    """Regenerate every output of the sweep ``grids`` from the store at ``out`` into
+    ``report_dir`` (default ``out``). Returns the files written."""
+    import gymnasium as gym
+
+    from dgpt_gym.evaluation import run_episode
+    from dgpt_gym.registry import TrackerSpec
+
+    grids = list(grids)
+    report_dir = Path(report_dir if report_dir is not None else out)
+    figures = report_dir / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    summaries, failures = summarize_store(grids, out)
+    written: list[Path] = []
+    if not summaries:
+        raise ValueError(f"the store at {out} holds no finished run of this sweep")
+    written.append(write_cells_csv(summaries, report_dir / "results_cells.csv"))
+
+    paper_rows = [row for row in summaries if row["tracker"] in PAPER_GP_TRACKERS]
+    if paper_rows:
+        tables = report_dir / "results_tables.md"
+        report.write_paper_tables(paper_rows, tables, command)
+        written += [tables, tables.with_suffix(".md.csv")]
+
+    fig8 = [
+        row
+        for row in summaries
+        if row["tracker"] in report.HYBRID_COMPARISON_TRACKERS
+        and row["noise_std"] == 1.0
+        and row["clutter_rate"] == 5.0
+    ]
+    if len({row["tracker"] for row in fig8}) >= 2:
+        hybrid = report_dir / "results_hybrid.md"
+        written.append(report.plot_hybrid_comparison(fig8, figures / "hybrid_comparison.png"))
+        hybrid.write_text(report.hybrid_comparison_markdown(fig8, command))
+        written.append(hybrid)
+
+    unit = _figure_run(grids, summaries)
+    if unit is not None:
+        tracker = TrackerSpec(unit.tracker, unit.entry_point).load()(**unit.tracker_kwargs)
+        env = gym.make("DGPTrack-v0", **unit.env_kwargs)
+        result = run_episode(env, tracker, unit.seed)
+        env.close()
+        settings = ", ".join(f"{key} {value}" for key, value in unit.env_kwargs.items())
+        figure = plot_ucb_vs_ci(
+            result, figures / "ucb_vs_ci.png", f"{unit.tracker}, {settings}, seed {unit.seed}"
+        )
+        uncertainty = report_dir / "results_uncertainty.md"
+        uncertainty.write_text(uncertainty_markdown(summaries, command, "figures/ucb_vs_ci.png"))
+        written += [figure, uncertainty]
+
+    written.append(plot_scenarios(figures / "scenarios.png"))
+    if training_time_csv is not None and Path(training_time_csv).exists():
+        rows = read_training_time(training_time_csv)
+        written.append(plot_training_time(rows, figures / "training_time.png"))
+
+    links = [
+        f"[{path.relative_to(report_dir)}]({path.relative_to(report_dir)})" for path in written
+    ]
+    results = report_dir / "results.md"
+    results.write_text(
+        results_markdown(summaries, failures, len(sweep_units(grids)), command, links)
+    )
+    return [results, *written]

@@ -1,0 +1,127 @@
+"""The results store of an evaluation sweep: one embedded SQLite database per output folder.
+
+Every finished (cell, seed, tracker) run is one row, committed as soon as the run finishes,
+so an interrupted sweep (Ctrl-C, a killed process) loses no finished row. The row's key is a
+hash of its whole configuration (tracker id and arguments, environment arguments, seed):
+re-running a sweep skips the keys already stored with status ``"ok"`` and never duplicates
+one. Failed runs are stored with their error and retried by the next run of the sweep.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sqlite3
+import time
+from pathlib import Path
+
+__all__ = ["ResultsStore", "run_key", "DATABASE_NAME"]
+
+DATABASE_NAME = "results.sqlite"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS runs (
+    run_key TEXT PRIMARY KEY,
+    tracker TEXT NOT NULL,
+    scenario TEXT NOT NULL,
+    noise_std REAL NOT NULL,
+    clutter_rate REAL NOT NULL,
+    seed INTEGER NOT NULL,
+    tracker_kwargs TEXT NOT NULL,
+    env_kwargs TEXT NOT NULL,
+    status TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+    error TEXT,
+    metrics TEXT,
+    runtime_s REAL,
+    version TEXT NOT NULL,
+    finished_at TEXT NOT NULL
+)
+"""
+
+
+def _canonical(value) -> str:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"))
+
+
+def run_key(tracker: str, tracker_kwargs: dict, env_kwargs: dict, seed: int) -> str:
+    """The identity of a run: a SHA-256 of its canonical JSON configuration."""
+    text = _canonical([tracker, tracker_kwargs, env_kwargs, int(seed)])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class ResultsStore:
+    """SQLite table ``runs`` in ``folder/results.sqlite`` (created on first use).
+
+    Only the process that runs the sweep writes; workers return their rows to it. Each
+    :meth:`add` is its own transaction (WAL journal), so a crash keeps every earlier row.
+    """
+
+    def __init__(self, folder: str | Path) -> None:
+        self.path = Path(folder) / DATABASE_NAME
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._connection = sqlite3.connect(self.path)
+        self._connection.execute("PRAGMA journal_mode=WAL")
+        self._connection.execute(_SCHEMA)
+        self._connection.commit()
+
+    def close(self) -> None:
+        self._connection.close()
+
+    def __enter__(self) -> ResultsStore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def finished_keys(self) -> set[str]:
+        """Keys of the runs stored with status ``"ok"``."""
+        cursor = self._connection.execute("SELECT run_key FROM runs WHERE status = 'ok'")
+        return {key for (key,) in cursor}
+
+    def add(self, unit, status: str, metrics: dict | None, error: str | None, runtime_s: float):
+        """Store the outcome of ``unit`` (a :class:`dgpt_gym.sweep.RunUnit`), replacing an
+        earlier failure of the same run."""
+        from dgpt_gym import __version__
+
+        env = unit.env_kwargs
+        with self._connection:
+            self._connection.execute(
+                "INSERT OR REPLACE INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    unit.key,
+                    unit.tracker,
+                    env["scenario"],
+                    env["noise_std"],
+                    env["clutter_rate"],
+                    unit.seed,
+                    _canonical(unit.tracker_kwargs),
+                    _canonical(env),
+                    status,
+                    error,
+                    None if metrics is None else _canonical(metrics),
+                    runtime_s,
+                    __version__,
+                    time.strftime("%Y-%m-%dT%H:%M:%S"),
+                ),
+            )
+
+    def rows(self, keys: set[str] | None = None, status: str | None = None) -> list[dict]:
+        """Stored rows (restricted to ``keys`` and ``status`` when given), sorted by tracker,
+        cell and seed, with ``metrics``, ``tracker_kwargs`` and ``env_kwargs`` decoded."""
+        query = "SELECT * FROM runs"
+        parameters: tuple = ()
+        if status is not None:
+            query += " WHERE status = ?"
+            parameters = (status,)
+        query += " ORDER BY tracker, scenario, noise_std, clutter_rate, seed"
+        cursor = self._connection.execute(query, parameters)
+        names = [column[0] for column in cursor.description]
+        rows = []
+        for values in cursor:
+            row = dict(zip(names, values))
+            if keys is not None and row["run_key"] not in keys:
+                continue
+            for field in ("metrics", "tracker_kwargs", "env_kwargs"):
+                row[field] = None if row[field] is None else json.loads(row[field])
+            rows.append(row)
+        return rows

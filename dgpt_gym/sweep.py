@@ -1,0 +1,334 @@
+"""Evaluation sweeps: grids of (tracker, scenario, noise, clutter, seed) runs, executed on a
+local process pool or a Dask cluster, stored run by run in a :class:`ResultsStore`.
+
+A :class:`Grid` is trackers x scenarios x noise levels x clutter rates x seeds; a sweep is a
+list of grids (the paper's grid is two: the GP trackers on every cell, the hybrid filters
+and the CPF on the cell of Fig. 8). Each run is a picklable :class:`RunUnit` that carries
+its tracker's entry point, so a worker needs no registry. A run is a pure function of its
+unit: local and Dask runs of the same units give identical rows.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+
+from dgpt_gym.evaluation import _single_threaded_blas, run_episode, summarize_runs
+from dgpt_gym.store import ResultsStore, run_key
+from dgpt_gym.validation import check_integer, check_real
+
+__all__ = [
+    "Grid",
+    "RunUnit",
+    "SweepReport",
+    "run_unit",
+    "run_units",
+    "run_sweep",
+    "summarize_store",
+    "sweep_units",
+    "QUICK_SWEEP",
+    "PAPER_SWEEP",
+    "PAPER_GP_TRACKERS",
+]
+
+PAPER_GP_TRACKERS = (
+    "gp",
+    "gp-stgp",
+    "dgpt-rbcm",
+    "dgpt-rbcm-stgp",
+    "dgpt-gpoe",
+    "dgpt-gpoe-stgp",
+)
+"""The approaches of the paper's Tables II-IX: standard GP, DGPT-RBCM, DGPT-GPoE, each
+with temporal (TGP) and spatio-temporal (STGP) inputs."""
+
+
+@dataclass(frozen=True)
+class RunUnit:
+    """One episode: a tracker (id, entry point, full constructor arguments), the
+    environment's arguments and the seed of both."""
+
+    tracker: str
+    entry_point: str
+    tracker_kwargs: dict = field(hash=False)
+    env_kwargs: dict = field(hash=False)
+    seed: int = 0
+
+    @property
+    def key(self) -> str:
+        return run_key(self.tracker, self.tracker_kwargs, self.env_kwargs, self.seed)
+
+    @property
+    def cell(self) -> tuple[str, str, float, float]:
+        """(tracker, scenario, noise_std, clutter_rate)."""
+        env = self.env_kwargs
+        return (self.tracker, env["scenario"], env["noise_std"], env["clutter_rate"])
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Every tracker on every (scenario, noise_std, clutter_rate) cell, seeds
+    ``first_seed .. first_seed + runs - 1`` (the same seeds give every tracker the same
+    measurements). With ``tuned_windows`` the GP trackers use the window tuned for the
+    scenario (:mod:`dgpt_gym.tuning`)."""
+
+    trackers: tuple[str, ...]
+    scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4")
+    noise_levels: tuple[float, ...] = (1.0,)
+    clutter_rates: tuple[float, ...] = (1.0, 5.0)
+    runs: int = 10
+    first_seed: int = 0
+    tuned_windows: bool = True
+
+    def __post_init__(self) -> None:
+        from dgpt_gym.registry import tracker_spec
+        from dgpt_gym.scenarios import get_scenario
+
+        for name in ("trackers", "scenarios", "noise_levels", "clutter_rates"):
+            if not isinstance(getattr(self, name), Sequence) or not getattr(self, name):
+                raise ValueError(
+                    f"{name} must be a non-empty sequence; got {getattr(self, name)!r}"
+                )
+        for tracker in self.trackers:
+            tracker_spec(tracker)
+        for scenario in self.scenarios:
+            get_scenario(scenario)
+        for noise in self.noise_levels:
+            check_real("noise_std", noise, low=0.0, low_inclusive=False)
+        for clutter in self.clutter_rates:
+            check_real("clutter_rate", clutter, low=0.0)
+        check_integer("runs", self.runs, low=1)
+        check_integer("first_seed", self.first_seed, low=0)
+
+    def units(self) -> list[RunUnit]:
+        from dgpt_gym.registry import tracker_spec
+        from dgpt_gym.tuning import tuned_kwargs
+
+        units = []
+        for scenario in self.scenarios:
+            for noise in self.noise_levels:
+                for clutter in self.clutter_rates:
+                    env_kwargs = {
+                        "scenario": scenario,
+                        "noise_std": float(noise),
+                        "clutter_rate": float(clutter),
+                    }
+                    for tracker in self.trackers:
+                        spec = tracker_spec(tracker)
+                        kwargs = dict(spec.kwargs)
+                        if self.tuned_windows:
+                            kwargs.update(tuned_kwargs(tracker, scenario))
+                        for seed in range(self.first_seed, self.first_seed + self.runs):
+                            units.append(
+                                RunUnit(tracker, spec.entry_point, kwargs, env_kwargs, seed)
+                            )
+        return units
+
+
+QUICK_SWEEP = (Grid(trackers=("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "cpf"), runs=10),)
+"""``scripts/evaluate.py`` with no options (and ``make evaluate``): about two minutes."""
+
+PAPER_SWEEP = (
+    Grid(trackers=PAPER_GP_TRACKERS, noise_levels=(1.0, 2.0, 4.0), runs=100),
+    Grid(
+        trackers=("hybrid", "hybrid-paper", "cpf"),
+        noise_levels=(1.0,),
+        clutter_rates=(5.0,),
+        runs=100,
+    ),
+)
+"""``--paper``: Tables II-IX (six GP trackers, sigma_z in {1, 2, 4}, clutter 1 and 5) and the
+cell of Fig. 8 (sigma_z = 1, clutter 5) for the hybrid filter in both variants and the CPF,
+100 Monte Carlo runs each."""
+
+
+def sweep_units(grids: Iterable[Grid]) -> list[RunUnit]:
+    """The units of all ``grids``, without repeats (grids may overlap)."""
+    units, seen = [], set()
+    for grid in grids:
+        for unit in grid.units():
+            if unit.key not in seen:
+                seen.add(unit.key)
+                units.append(unit)
+    return units
+
+
+def run_unit(unit: RunUnit) -> dict:
+    """Run one episode; never raises. Returns ``status`` ("ok" or "failed"), ``metrics``
+    (:meth:`EpisodeResult.metrics`), ``error`` and the wall ``runtime_s``."""
+    from dgpt_gym.registry import TrackerSpec
+
+    started = time.perf_counter()
+    try:
+        tracker = TrackerSpec(unit.tracker, unit.entry_point).load()(**unit.tracker_kwargs)
+        env = gym.make("DGPTrack-v0", **unit.env_kwargs)
+        try:
+            metrics = run_episode(env, tracker, unit.seed).metrics()
+        finally:
+            env.close()
+        status, error = "ok", None
+    except Exception as exception:  # a failed run is recorded, the sweep goes on
+        status, metrics, error = "failed", None, f"{type(exception).__name__}: {exception}"
+    return {
+        "status": status,
+        "metrics": metrics,
+        "error": error,
+        "runtime_s": time.perf_counter() - started,
+    }
+
+
+@dataclass(frozen=True)
+class SweepReport:
+    """What a call of :func:`run_sweep` did: units of the sweep, found already finished in
+    the store, run now, and failed now (``errors``: the first few, with their run)."""
+
+    total: int
+    already_finished: int
+    ran: int
+    failed: int
+    errors: tuple[str, ...] = ()
+
+
+def run_units(units: list[RunUnit], workers: int = 1, progress: bool = True) -> list[dict]:
+    """:func:`run_unit` of every unit, in order, on ``workers`` local processes, without a
+    store (for short searches such as :func:`dgpt_gym.tuning.tune_windows`)."""
+    from tqdm.auto import tqdm
+
+    index = {id(unit): i for i, unit in enumerate(units)}
+    outcomes: list[dict] = [{}] * len(units)
+    with tqdm(total=len(units), desc="runs", disable=not progress) as bar:
+        for unit, outcome in _local_results(units, workers):
+            outcomes[index[id(unit)]] = outcome
+            bar.update()
+    return outcomes
+
+
+def _local_results(units: list[RunUnit], workers: int):
+    """Yield ``(unit, outcome)`` as runs finish on a process pool (in-process for 1)."""
+    if workers <= 1:
+        for unit in units:
+            yield unit, run_unit(unit)
+        return
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas)
+    try:
+        futures = {pool.submit(run_unit, unit): unit for unit in units}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    finally:  # on Ctrl-C or an error, drop what has not started
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask_results(units: list[RunUnit], scheduler: str):
+    """Yield ``(unit, outcome)`` as runs finish on the Dask cluster at ``scheduler``."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError as error:  # pragma: no cover - depends on the install
+        raise ImportError(
+            "--scheduler needs dask.distributed: pip install 'dgpt-gym[cluster]'"
+        ) from error
+    with Client(scheduler) as client:
+        client.run(_single_threaded_blas)
+        futures = client.map(run_unit, units, pure=False)
+        owner = {future.key: unit for future, unit in zip(futures, units)}
+        try:
+            for future in as_completed(futures):
+                try:
+                    outcome = future.result()
+                except Exception as error:  # a lost worker: record, go on
+                    outcome = {
+                        "status": "failed",
+                        "metrics": None,
+                        "error": f"{type(error).__name__}: {error}",
+                        "runtime_s": float("nan"),
+                    }
+                yield owner[future.key], outcome
+        finally:
+            client.cancel(futures)
+
+
+def run_sweep(
+    grids: Iterable[Grid],
+    out: str | Path,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> SweepReport:
+    """Run every unit of ``grids`` not yet finished in the store at ``out``, storing each
+    outcome as soon as it arrives.
+
+    Args:
+        grids: the sweep.
+        out: output folder; the database is ``out/results.sqlite``.
+        workers: local worker processes (default: all cores; 1 runs in this process).
+            Ignored with ``scheduler``.
+        scheduler: address of a running Dask scheduler (``tcp://host:8786``) to run on
+            instead of the local pool.
+        progress: show a tqdm bar over runs with an ETA.
+    """
+    from tqdm.auto import tqdm
+
+    units = sweep_units(grids)
+    if workers is None:
+        workers = os.cpu_count() or 1
+    check_integer("workers", workers, low=1)
+    failed, errors = 0, []
+    with ResultsStore(out) as store:
+        finished = store.finished_keys()
+        todo = [unit for unit in units if unit.key not in finished]
+        results = _dask_results(todo, scheduler) if scheduler else _local_results(todo, workers)
+        with tqdm(
+            total=len(units), initial=len(units) - len(todo), desc="runs", disable=not progress
+        ) as bar:
+            for unit, outcome in results:
+                store.add(unit, **outcome)
+                if outcome["status"] == "failed":
+                    failed += 1
+                    if len(errors) < 5:
+                        errors.append(f"{unit.cell} seed {unit.seed}: {outcome['error']}")
+                    bar.set_postfix(failed=failed)
+                bar.update()
+    return SweepReport(len(units), len(units) - len(todo), len(todo), failed, tuple(errors))
+
+
+def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:
+    """Per-cell summaries (:func:`summarize_runs`, seeds in order) of the sweep's finished
+    runs in the store at ``out``, in the grids' order, and the stored rows of its failed
+    runs."""
+    units = sweep_units(grids)
+    keys = {unit.key for unit in units}
+    with ResultsStore(out) as store:
+        stored = {row["run_key"]: row for row in store.rows(keys)}
+    by_cell: dict[tuple, list[dict]] = {}
+    kwargs_of_cell: dict[tuple, dict] = {}
+    failures = []
+    for unit in units:
+        row = stored.get(unit.key)
+        kwargs_of_cell.setdefault(unit.cell, unit.tracker_kwargs)
+        if row is None:
+            continue
+        if row["status"] != "ok":
+            failures.append(row)
+            continue
+        by_cell.setdefault(unit.cell, []).append({"seed": unit.seed, **row["metrics"]})
+    summaries = []
+    for cell, runs in by_cell.items():
+        tracker, scenario, noise, clutter = cell
+        window = kwargs_of_cell[cell].get("window")  # None: the tracker has no window
+        summaries.append(
+            {
+                "tracker": tracker,
+                "scenario": scenario,
+                "noise_std": noise,
+                "clutter_rate": clutter,
+                "window": window,
+                **summarize_runs(sorted(runs, key=lambda run: run["seed"])),
+            }
+        )
+    return summaries, failures

@@ -1,0 +1,189 @@
+"""The evaluation harness: grids, the SQLite results store, resume, Dask, failures, outputs."""
+
+import csv
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from flaky_tracker import FAILING_SEED
+
+from dgpt_gym import make_tracker, register_tracker
+from dgpt_gym.evaluation import run_episode
+from dgpt_gym.outputs import write_outputs
+from dgpt_gym.store import DATABASE_NAME, ResultsStore
+from dgpt_gym.sweep import Grid, run_sweep, summarize_store, sweep_units
+from dgpt_gym.tuning import tuned_kwargs
+
+ROOT = Path(__file__).resolve().parents[1]
+DETERMINISTIC = ("step_time_ms",)  # wall-clock: the one metric that varies between runs
+
+
+def stored_metrics(folder) -> dict[str, dict]:
+    with ResultsStore(folder) as store:
+        return {
+            row["run_key"]: {k: v for k, v in row["metrics"].items() if k not in DETERMINISTIC}
+            for row in store.rows(status="ok")
+        }
+
+
+def without_command_lines(path: Path) -> str:
+    return "\n".join(line for line in path.read_text().splitlines() if "Command:" not in line)
+
+
+def test_tiny_grid_end_to_end_equals_direct_episodes(tmp_path):
+    grid = Grid(trackers=("dgpt-rbcm", "centroid"), scenarios=("S3",), clutter_rates=(5.0,), runs=2)
+    report = run_sweep([grid], tmp_path, workers=1, progress=False)
+    assert (report.total, report.ran, report.failed) == (4, 4, 0)
+    written = write_outputs([grid], tmp_path, command="test")
+    names = {path.relative_to(tmp_path).as_posix() for path in written}
+    assert {
+        "results.md",
+        "results_cells.csv",
+        "results_tables.md",
+        "results_uncertainty.md",
+        "figures/ucb_vs_ci.png",
+        "figures/scenarios.png",
+    } <= names
+    assert all((tmp_path / name).stat().st_size > 0 for name in names)
+    with sqlite3.connect(tmp_path / DATABASE_NAME) as connection:
+        assert connection.execute("SELECT COUNT(*) FROM runs WHERE status = 'ok'").fetchone() == (
+            4,
+        )
+
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    direct = {
+        tracker: [
+            run_episode(env, make_tracker(tracker, **tuned_kwargs(tracker, "S3")), seed).metrics()
+            for seed in (0, 1)
+        ]
+        for tracker in ("dgpt-rbcm", "centroid")
+    }
+    with (tmp_path / "results_cells.csv").open() as handle:
+        cells = {row["tracker"]: row for row in csv.DictReader(handle)}
+    for tracker, runs in direct.items():
+        for key in ("nrmse_x", "nrmse_y", "rmse_y", "ci_coverage_x"):
+            assert float(cells[tracker][key]) == pytest.approx(
+                np.mean([r[key] for r in runs]), rel=1e-12
+            )
+        std = np.std([r["rmse_x"] for r in runs], ddof=1)
+        assert float(cells[tracker]["rmse_std_x"]) == pytest.approx(std, rel=1e-12)
+    # the paper-style table prints our NRMSE in percent with two decimals
+    nrmse_x = 100 * np.mean([r["nrmse_x"] for r in direct["dgpt-rbcm"]])
+    table = (tmp_path / "results_tables.md").read_text()
+    assert f"| {nrmse_x:.2f} (" in table
+    assert "Table IV" in table  # S3, TGP
+
+
+def test_rerun_skips_finished_runs(tmp_path):
+    grid = Grid(trackers=("centroid",), scenarios=("S1",), clutter_rates=(1.0,), runs=3)
+    first = run_sweep([grid], tmp_path, workers=1, progress=False)
+    bigger = Grid(trackers=("centroid",), scenarios=("S1",), clutter_rates=(1.0,), runs=5)
+    second = run_sweep([bigger], tmp_path, workers=1, progress=False)
+    assert (first.ran, second.already_finished, second.ran) == (3, 3, 2)
+    summaries, failures = summarize_store([grid], tmp_path)
+    assert summaries[0]["n_runs"] == 3 and failures == []  # only the grid's own seeds
+
+
+def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
+    args = [
+        sys.executable,
+        str(ROOT / "scripts" / "evaluate.py"),
+        *("--trackers", "dgpt-rbcm", "--scenarios", "S4", "--clutter-rates", "1"),
+        *("--runs", "30", "--workers", "1", "--no-progress"),
+    ]
+    killed = tmp_path / "killed"
+    process = subprocess.Popen([*args, "--out", str(killed)], stdout=subprocess.DEVNULL)
+    database = killed / DATABASE_NAME
+    deadline = time.monotonic() + 120
+    finished = 0
+    while finished < 5 and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.05)
+        if database.exists():
+            with sqlite3.connect(database) as connection:
+                try:
+                    finished = connection.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+                except sqlite3.OperationalError:  # table not created yet
+                    finished = 0
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    before = stored_metrics(killed)
+    assert 5 <= len(before) < 30, "the kill must land part-way through the sweep"
+
+    resumed = subprocess.run([*args, "--out", str(killed)], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"30 runs: {len(before)} already in" in resumed.stdout
+    after = stored_metrics(killed)
+    with sqlite3.connect(database) as connection:
+        assert connection.execute("SELECT COUNT(*) FROM runs").fetchone() == (30,)
+        seeds = [s for (s,) in connection.execute("SELECT seed FROM runs ORDER BY seed")]
+    assert seeds == list(range(30))  # none lost, none twice
+    assert all(after[key] == value for key, value in before.items())
+
+    clean = tmp_path / "clean"
+    uninterrupted = subprocess.run([*args, "--out", str(clean)], capture_output=True, text=True)
+    assert uninterrupted.returncode == 0, uninterrupted.stderr
+    assert stored_metrics(clean) == after
+    for name in ("results_tables.md", "results_uncertainty.md"):
+        assert without_command_lines(killed / name) == without_command_lines(clean / name)
+
+
+def test_local_pool_and_dask_cluster_give_identical_rows(tmp_path):
+    from distributed import LocalCluster
+
+    grid = Grid(trackers=("dgpt-gpoe", "cpf"), scenarios=("S2",), clutter_rates=(5.0,), runs=3)
+    local = run_sweep([grid], tmp_path / "local", workers=2, progress=False)
+    with LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
+        remote = run_sweep(
+            [grid], tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False
+        )
+    assert local.ran == remote.ran == 6 and local.failed == remote.failed == 0
+    assert stored_metrics(tmp_path / "local") == stored_metrics(tmp_path / "dask")
+
+
+def test_a_failing_run_is_recorded_and_the_sweep_completes(tmp_path):
+    register_tracker("flaky", entry_point="flaky_tracker:FlakyTracker")
+    grid = Grid(trackers=("flaky",), scenarios=("S1",), clutter_rates=(1.0,), runs=3)
+    report = run_sweep([grid], tmp_path, workers=1, progress=False)
+    assert (report.ran, report.failed) == (3, 1)
+    assert "FloatingPointError: diverged on seed 1" in report.errors[0]
+    summaries, failures = summarize_store([grid], tmp_path)
+    assert summaries[0]["n_runs"] == 2
+    assert [(row["seed"], row["status"]) for row in failures] == [(FAILING_SEED, "failed")]
+    write_outputs([grid], tmp_path, command="test")
+    text = (tmp_path / "results.md").read_text()
+    assert "**1 failed**" in text and "diverged on seed 1" in text
+    again = run_sweep([grid], tmp_path, workers=1, progress=False)  # failures are retried
+    assert (again.already_finished, again.ran, again.failed) == (2, 1, 1)
+    with sqlite3.connect(tmp_path / DATABASE_NAME) as connection:
+        assert connection.execute("SELECT COUNT(*) FROM runs").fetchone() == (3,)
+
+
+def test_grids_validate_their_arguments():
+    with pytest.raises(ValueError, match=r"tracker must be one of \[.*'dgpt-rbcm'"):
+        Grid(trackers=("kalman",))
+    with pytest.raises(ValueError, match=r"'S1', 'S2', 'S3', 'S4'"):
+        Grid(trackers=("gp",), scenarios=("S9",))
+    with pytest.raises(ValueError, match="runs"):
+        Grid(trackers=("gp",), runs=0)
+    with pytest.raises(ValueError, match="noise_std"):
+        Grid(trackers=("gp",), noise_levels=(-1.0,))
+
+
+def test_overlapping_grids_run_each_unit_once():
+    a = Grid(trackers=("gp", "cpf"), scenarios=("S1",), clutter_rates=(5.0,), runs=2)
+    b = Grid(trackers=("cpf",), scenarios=("S1", "S2"), clutter_rates=(5.0,), runs=2)
+    units = sweep_units([a, b])
+    assert len(units) == 4 + 2
+    assert len({unit.key for unit in units}) == len(units)
