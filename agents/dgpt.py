@@ -88,6 +88,11 @@ class DGPT(TrackerBase):
             terms of Theorem 3) instead of the one-step gamma of Theorems 1-2.
         gating: weigh each sensor's measurements by eqs. (27)-(28) (the default); False
             takes their unweighted mean (an ablation).
+        gate_threshold: None (the paper: soft gating only) or a hard gate in front of
+            eqs. (27)-(28): measurements whose Mahalanobis distance
+            sqrt(sum_axes (z - mu_*)^2 / (sigma_*^2 + sigma_n^2)) from their sensor's
+            prediction exceeds it are dropped before the weighted mean. The RL gating
+            environment sets it step by step.
     """
 
     name = "dgpt"
@@ -103,6 +108,7 @@ class DGPT(TrackerBase):
         max_iterations: int = 5,
         anytime_ucb: bool = False,
         gating: bool = True,
+        gate_threshold: float | None = None,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.inputs = check_choice("inputs", inputs, INPUTS)
@@ -114,6 +120,11 @@ class DGPT(TrackerBase):
         self.max_iterations = check_integer("max_iterations", max_iterations, low=1)
         self.anytime_ucb = bool(anytime_ucb)
         self.gating = bool(gating)
+        self.gate_threshold = (
+            None
+            if gate_threshold is None
+            else check_real("gate_threshold", gate_threshold, low=0.0, low_inclusive=False)
+        )
         self.name = f"{'gp' if self.pooled else 'dgpt-' + self.aggregation}-{self.inputs}"
 
     # -- hyperparameters ------------------------------------------------------------------
@@ -151,7 +162,17 @@ class DGPT(TrackerBase):
         self.n_experts_ = 0
         self.fit_failures_ = 0
         self.last_fit_: gp.FitResult | None = None
+        self.last_innovation_ = np.empty((0, 2))  # gated summaries - their predictions
+        self.last_gated_out_ = 0  # measurements the hard gate dropped at the last step
         self._model = None
+
+    def set_window(self, window: int, keep: int | None = None) -> None:
+        """Use the window length C = ``window`` from now on in this episode (the RL window
+        environment does, step by step; ``reset`` returns to the constructor's ``window``).
+        ``keep``: steps of history to retain so that C can grow again later."""
+        window = check_integer("window", window, low=2)
+        self.window_.length = window
+        self.window_.capacity = max(window, keep or 0, self.window_.capacity)
 
     def update(self, obs: dict) -> Estimate:
         if self.spec_ is None:
@@ -160,13 +181,12 @@ class DGPT(TrackerBase):
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
-        if points.shape[0]:
-            self._record(step, points, sensors)
+        recorded = bool(points.shape[0]) and self._record(step, points, sensors)
         data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
         if data is None:  # nothing seen yet in this episode
             centre = np.full(2, self.spec_.area / 2.0)
             return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
-        if points.shape[0] and data.n_points >= 3:
+        if recorded and data.n_points >= 3:
             self._learn(data)
         return self._predict(step, data)
 
@@ -190,14 +210,26 @@ class DGPT(TrackerBase):
         noise = np.exp(self.log_params_[:, -1])
         return mean, var + noise
 
-    def _record(self, step: int, points: np.ndarray, sensors: np.ndarray) -> None:
-        if self.gating:
-            mean, var = self._gate_prediction(points, sensors)
-        else:  # equal likelihoods: every measurement of a sensor gets the same weight
+    def _record(self, step: int, points: np.ndarray, sensors: np.ndarray) -> bool:
+        """Gate the step's measurements into one summary per sensor and add them to the
+        window; False if the hard gate dropped every measurement."""
+        mean, var = self._gate_prediction(points, sensors)
+        self.last_gated_out_ = 0
+        if self.gate_threshold is not None and self.prior_next_ is not None:
+            inside = np.sum((points - mean) ** 2 / var, axis=1) <= self.gate_threshold**2
+            self.last_gated_out_ = int(inside.size - inside.sum())
+            points, sensors, mean, var = points[inside], sensors[inside], mean[inside], var[inside]
+            if not points.shape[0]:
+                self.last_innovation_ = np.empty((0, 2))
+                return False
+        if not self.gating:  # equal likelihoods: every measurement of a sensor gets the same weight
             mean, var = points, np.ones_like(points)
         gated = gate_measurements(points, sensors, mean, var)
+        predicted = self._gate_prediction(gated.summaries, gated.sensors)[0]
+        self.last_innovation_ = gated.summaries - predicted
         previous = self.estimate_ if self.estimate_ is not None else np.median(points, axis=0)
         self.window_.add(StepRecord(step, gated.sensors, gated.summaries, previous))
+        return True
 
     def _learn(self, data) -> None:
         result = gp.fit_hyperparameters(

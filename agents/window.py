@@ -106,13 +106,17 @@ class SlidingWindow:
     grows steadily with the time since (rather than losing its data one step at a time).
     """
 
-    def __init__(self, length: int) -> None:
+    def __init__(self, length: int, capacity: int | None = None) -> None:
         self.length = length
+        self.capacity = length if capacity is None else max(capacity, length)
         self.records: deque[StepRecord] = deque()
 
     def add(self, record: StepRecord) -> None:
+        """Append a step's summaries; records older than ``capacity`` steps are dropped (the
+        window uses the last ``length`` of them: a larger capacity lets the length grow
+        again mid-episode)."""
         self.records.append(record)
-        while self.records[0].step <= record.step - self.length:
+        while self.records[0].step <= record.step - max(self.capacity, self.length):
             self.records.popleft()
 
     def expert_data(self, step: int, spatial: bool, mean: str, pooled: bool) -> ExpertData | None:
@@ -123,9 +127,10 @@ class SlidingWindow:
         prior mean (:func:`window_prior_mean`). ``pooled`` puts every summary into one
         expert (the centralized GP).
         """
-        records = self.records
-        if not records:
+        if not self.records:
             return None
+        latest = self.records[-1].step
+        records = [record for record in self.records if record.step > latest - self.length]
         counts = [record.sensors.size for record in records]
         sensors = np.concatenate([record.sensors for record in records])
         summaries = np.concatenate([record.summaries for record in records])
