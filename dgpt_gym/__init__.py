@@ -1,6 +1,7 @@
 """dgpt-gym: distributed Gaussian-process target tracking in wireless sensor networks.
 
-Importing this package registers the environment ``DGPTrack-v0`` with Gymnasium and the
+Importing this package registers the environment ``DGPTrack-v0`` and the RL environments
+``DGPTrackWindow-v0``, ``DGPTrackGating-v0``, ``DGPTrackSensors-v0`` with Gymnasium and the
 trackers with :func:`dgpt_gym.registry.make_tracker` (as entry-point strings: nothing from
 ``agents`` or ``baselines`` is imported until a tracker is built).
 """
@@ -32,6 +33,14 @@ __all__ = [
 
 if "DGPTrack-v0" not in gymnasium.registry:
     gymnasium.register(id="DGPTrack-v0", entry_point="dgpt_gym.env:DGPTrackEnv")
+# The RL environments (agents/rl) as entry-point strings: nothing is imported until made.
+for _id, _entry_point in (
+    ("DGPTrackWindow-v0", "agents.rl.tuning_envs:DGPTrackWindowEnv"),
+    ("DGPTrackGating-v0", "agents.rl.tuning_envs:DGPTrackGatingEnv"),
+    ("DGPTrackSensors-v0", "agents.rl.sensors_env:DGPTrackSensorsEnv"),
+):
+    if _id not in gymnasium.registry:
+        gymnasium.register(id=_id, entry_point=_entry_point)
 
 register_tracker("centroid", entry_point="baselines.centroid:GatedCentroidTracker")
 for _aggregation in ("rbcm", "gpoe", "bcm", "poe"):

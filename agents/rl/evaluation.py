@@ -1,0 +1,146 @@
+"""Baseline policies of the RL environments and their evaluation on held-out seeds.
+
+A policy is anything with ``predict(observation) -> action``; trained Stable-Baselines3
+models are wrapped by :class:`ModelPolicy`. :func:`evaluate_policy_on_seeds` runs one
+episode per seed (``reset(seed=s)``), so every policy meets the same measurements.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import gymnasium as gym
+import numpy as np
+from scipy import stats
+
+from dgpt_gym import metrics
+
+__all__ = [
+    "ConstantPolicy",
+    "RandomPolicy",
+    "ModelPolicy",
+    "baseline_policies",
+    "run_policy_episode",
+    "evaluate_policy_on_seeds",
+    "summarize_episodes",
+    "TRAINING_SEEDS",
+    "EVALUATION_SEEDS",
+]
+
+TRAINING_SEEDS = range(1000, 1005)
+"""Seeds of the grid search for the best fixed baseline (disjoint from evaluation)."""
+EVALUATION_SEEDS = range(0, 20)
+"""Held-out seeds: no training episode uses them (training envs are seeded from 10_000)."""
+
+
+class ConstantPolicy:
+    """The same action every step (a fixed window, threshold or set of woken sensors)."""
+
+    def __init__(self, action) -> None:
+        self.action = action
+
+    def predict(self, observation):
+        return self.action
+
+
+class RandomPolicy:
+    """Uniform random actions from the action space, seeded."""
+
+    def __init__(self, action_space: gym.Space, seed: int = 0) -> None:
+        self.action_space = action_space
+        self.action_space.seed(seed)
+
+    def predict(self, observation):
+        return self.action_space.sample()
+
+
+class ModelPolicy:
+    """A Stable-Baselines3 model's deterministic action."""
+
+    def __init__(self, model) -> None:
+        self.model = model
+
+    def predict(self, observation):
+        action, _ = self.model.predict(observation, deterministic=True)
+        return action
+
+
+def baseline_policies(env: gym.Env) -> tuple[dict[str, object], str]:
+    """The fixed baselines of an RL environment: ``{name: policy}`` (the grid the best fixed
+    baseline is searched in) and the name of the default one.
+
+    - window: every candidate C; default C = 4, the DGPT tracker's default;
+    - gating: thresholds at actions -1, -0.75, ..., 1; default: no hard gate (the paper's
+      soft gating only, reached at the largest threshold, action 1);
+    - sensors: the nearest n candidates for n = 1..k; default: all k candidates on.
+    """
+    from agents.rl.sensors_env import DGPTrackSensorsEnv
+    from agents.rl.tuning_envs import DGPTrackGatingEnv, DGPTrackWindowEnv
+
+    inner = env.unwrapped
+    if isinstance(inner, DGPTrackWindowEnv):
+        policies = {f"fixed C={w}": ConstantPolicy(i) for i, w in enumerate(inner.windows)}
+        default = "fixed C=4" if "fixed C=4" in policies else next(iter(policies))
+        return policies, default
+    if isinstance(inner, DGPTrackGatingEnv):
+        policies = {}
+        for action in np.linspace(-1.0, 1.0, 9):
+            threshold = inner.threshold([action])
+            policies[f"fixed threshold {threshold:.3g}"] = ConstantPolicy(
+                np.array([action], dtype=np.float32)
+            )
+        return policies, list(policies)[-1]
+    if isinstance(inner, DGPTrackSensorsEnv):
+        k = inner.n_candidates
+        policies = {
+            f"nearest {n}": ConstantPolicy((np.arange(k) < n).astype(np.int8))
+            for n in range(1, k + 1)
+        }
+        return policies, f"nearest {k}"
+    raise ValueError(f"env must be one of the RL environments of agents.rl; got {type(inner)!r}")
+
+
+def run_policy_episode(env: gym.Env, policy, seed: int) -> dict[str, float]:
+    """One episode of ``policy``: its return, NRMSE per axis (paper Sec. VII-E), mean error
+    (m), and the mean per step of the knob it set (``env.unwrapped.knob``: window,
+    threshold or sensors woken)."""
+    observation, _ = env.reset(seed=seed)
+    total, done = 0.0, False
+    truth, estimates, knobs = [], [], []
+    while not done:
+        observation, reward, terminated, truncated, info = env.step(policy.predict(observation))
+        total += reward
+        done = terminated or truncated
+        truth.append(info["position"])
+        estimates.append(info["estimate"])
+        knobs.append(info[env.unwrapped.knob])
+    nrmse = metrics.nrmse(np.array(estimates), np.array(truth))
+    return {
+        "seed": seed,
+        "return": total,
+        "nrmse": float(np.mean(nrmse)),
+        "nrmse_x": float(nrmse[0]),
+        "nrmse_y": float(nrmse[1]),
+        "mean_error": float(np.mean(np.linalg.norm(np.array(estimates) - truth, axis=1))),
+        "per_step": float(np.mean(knobs)),
+    }
+
+
+def evaluate_policy_on_seeds(env: gym.Env, policy, seeds: Iterable[int]) -> list[dict]:
+    """:func:`run_policy_episode` for every seed."""
+    return [run_policy_episode(env, policy, int(seed)) for seed in seeds]
+
+
+def summarize_episodes(episodes: list[dict], confidence: float = 0.95) -> dict[str, float]:
+    """Mean and the half-width of a Student-t confidence interval of the return and NRMSE,
+    and the mean per-step knob, over episodes."""
+    summary = {"episodes": len(episodes)}
+    for key in ("return", "nrmse", "per_step"):
+        values = np.array([episode[key] for episode in episodes], dtype=float)
+        summary[key] = float(values.mean())
+        if values.size > 1:
+            sem = values.std(ddof=1) / np.sqrt(values.size)
+            summary[f"{key}_ci"] = float(sem * stats.t.ppf(0.5 + confidence / 2, values.size - 1))
+        else:
+            summary[f"{key}_ci"] = float("nan")
+    return summary

@@ -1,0 +1,254 @@
+"""Train a Stable-Baselines3 agent on an RL environment and compare it with the baselines.
+
+:func:`train_agent` trains (with a progress bar, optional TensorBoard), saves the model and
+its configuration; :func:`compare_with_baselines` searches the best fixed baseline on the
+training seeds and evaluates the agent, the baselines and a random policy on held-out seeds;
+:func:`plot_learning_curve` draws the training returns from the Monitor logs.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from agents.rl.evaluation import (
+    EVALUATION_SEEDS,
+    TRAINING_SEEDS,
+    ModelPolicy,
+    RandomPolicy,
+    baseline_policies,
+    evaluate_policy_on_seeds,
+    summarize_episodes,
+)
+from dgpt_gym.validation import check_choice, check_integer
+
+__all__ = [
+    "ALGORITHMS",
+    "RL_ENV_IDS",
+    "TRAINING_ENV_SEED",
+    "train_agent",
+    "compare_with_baselines",
+    "comparison_markdown",
+    "plot_learning_curve",
+    "load_agent",
+]
+
+RL_ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0", "DGPTrackSensors-v0")
+ALGORITHMS = ("ppo", "a2c", "dqn")
+TRAINING_ENV_SEED = 10_000
+"""Training environments are seeded from here: far from the evaluation seeds."""
+
+
+def _algorithm_class(algo: str):
+    import stable_baselines3
+
+    return getattr(stable_baselines3, algo.upper())
+
+
+def _progress_callback(total: int, enabled: bool):
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm.auto import tqdm
+
+    class TqdmCallback(BaseCallback):
+        """A tqdm bar over environment steps."""
+
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, desc="timesteps", disable=not enabled)
+
+        def _on_step(self) -> bool:
+            self.bar.n = self.num_timesteps
+            self.bar.refresh()
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TqdmCallback()
+
+
+@dataclass(frozen=True)
+class TrainedAgent:
+    model: object
+    model_path: Path
+    config: dict
+
+
+def train_agent(
+    env_id: str,
+    algo: str = "ppo",
+    timesteps: int = 20_000,
+    seed: int = 0,
+    n_envs: int = 4,
+    out: str | Path = "results/rl",
+    env_kwargs: dict | None = None,
+    algo_kwargs: dict | None = None,
+    progress: bool = True,
+    torch_threads: int = 1,
+) -> TrainedAgent:
+    """Train ``algo`` on ``env_id`` for ``timesteps`` steps over ``n_envs`` vectorized
+    environments (each wrapped in a Monitor that logs to ``out/monitor``); save
+    ``out/model.zip`` and ``out/config.json``. TensorBoard logs go to ``out/tensorboard``
+    when tensorboard is installed. ``torch_threads``: the policy networks are tiny, and
+    more than one torch thread only adds synchronisation (``torch.set_num_threads``)."""
+    import torch
+    from stable_baselines3.common.env_util import make_vec_env
+
+    check_choice("env", env_id, RL_ENV_IDS)
+    check_choice("algo", algo, ALGORITHMS)
+    check_integer("timesteps", timesteps, low=1)
+    check_integer("n_envs", n_envs, low=1)
+    check_integer("seed", seed, low=0)
+    env_kwargs = dict(env_kwargs or {})
+    probe = gym.make(env_id, **env_kwargs)  # fails early on bad env arguments
+    if algo == "dqn" and not isinstance(probe.action_space, gym.spaces.Discrete):
+        raise ValueError(
+            f"algo 'dqn' needs a Discrete action space; {env_id} has {probe.action_space}: "
+            "use ppo or a2c"
+        )
+    probe.close()
+    torch.set_num_threads(check_integer("torch_threads", torch_threads, low=1))
+    out = Path(out)
+    (out / "monitor").mkdir(parents=True, exist_ok=True)
+    venv = make_vec_env(
+        env_id,
+        n_envs=n_envs,
+        seed=TRAINING_ENV_SEED + seed * n_envs,
+        env_kwargs=env_kwargs,
+        monitor_dir=str(out / "monitor"),
+    )
+    tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
+    model = _algorithm_class(algo)(
+        "MlpPolicy",
+        venv,
+        seed=seed,
+        verbose=0,
+        tensorboard_log=tensorboard,
+        **(algo_kwargs or {}),
+    )
+    model.learn(total_timesteps=timesteps, callback=_progress_callback(timesteps, progress))
+    model_path = out / "model.zip"
+    model.save(model_path)
+    config = {
+        "env": env_id,
+        "env_kwargs": env_kwargs,
+        "algo": algo,
+        "algo_kwargs": algo_kwargs or {},
+        "timesteps": timesteps,
+        "seed": seed,
+        "n_envs": n_envs,
+        "training_env_seed": TRAINING_ENV_SEED + seed * n_envs,
+    }
+    (out / "config.json").write_text(json.dumps(config, indent=1) + "\n")
+    venv.close()
+    return TrainedAgent(model, model_path, config)
+
+
+def load_agent(out: str | Path):
+    """The model and configuration saved by :func:`train_agent` in ``out``."""
+    out = Path(out)
+    config = json.loads((out / "config.json").read_text())
+    return _algorithm_class(config["algo"]).load(out / "model.zip"), config
+
+
+def compare_with_baselines(
+    env_id: str,
+    model,
+    env_kwargs: dict | None = None,
+    training_seeds=TRAINING_SEEDS,
+    evaluation_seeds=EVALUATION_SEEDS,
+    progress: bool = True,
+) -> list[dict]:
+    """Rows (name, role, :func:`summarize_episodes`) for the trained agent, the best fixed
+    baseline (grid search on ``training_seeds``), the default baseline, every other fixed
+    baseline and a random policy, all on ``evaluation_seeds``."""
+    from tqdm.auto import tqdm
+
+    env = gym.make(env_id, **(env_kwargs or {}))
+    policies, default = baseline_policies(env)
+    search = {
+        name: summarize_episodes(evaluate_policy_on_seeds(env, policy, training_seeds))["return"]
+        for name, policy in tqdm(policies.items(), desc="best fixed baseline", disable=not progress)
+    }
+    best = max(search, key=search.get)
+    candidates = [("trained agent", "agent", ModelPolicy(model))]
+    if default == best:
+        candidates.append((best, "best fixed (training seeds) and default", policies[best]))
+    else:
+        candidates.append((best, "best fixed (training seeds)", policies[best]))
+        candidates.append((default, "default", policies[default]))
+    candidates += [
+        (name, "fixed", policy) for name, policy in policies.items() if name not in (best, default)
+    ]
+    candidates.append(("random", "random", RandomPolicy(env.action_space, seed=0)))
+    rows = []
+    for name, role, policy in tqdm(candidates, desc="held-out evaluation", disable=not progress):
+        episodes = evaluate_policy_on_seeds(env, policy, evaluation_seeds)
+        rows.append(
+            {"policy": name, "role": role, **summarize_episodes(episodes), "episodes_": episodes}
+        )
+    env.close()
+    return rows
+
+
+def comparison_markdown(rows: list[dict], env_id: str, per_step_label: str) -> str:
+    """The comparison as a Markdown table (mean +- 95 % CI half-width over held-out seeds)."""
+    lines = [
+        f"| {env_id} policy | role | episode return | NRMSE % | {per_step_label} |",
+        "|---|---|---|---|---|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['policy']} | {row['role']} | {row['return']:.2f} +- {row['return_ci']:.2f} | "
+            f"{100 * row['nrmse']:.2f} +- {100 * row['nrmse_ci']:.2f} | "
+            f"{row['per_step']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def monitor_returns(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(cumulative timesteps, return) of every training episode in the Monitor CSVs of
+    ``folder`` (a JSON comment line, then columns r, l, t), ordered by wall time."""
+    episodes = []
+    for path in sorted(folder.glob("*.monitor.csv")):
+        with path.open() as handle:
+            handle.readline()  # the JSON header
+            episodes += [
+                (float(row["t"]), float(row["r"]), int(row["l"])) for row in csv.DictReader(handle)
+            ]
+    episodes.sort()
+    lengths = np.array([length for _, _, length in episodes], dtype=float)
+    returns = np.array([value for _, value, _ in episodes])
+    return np.cumsum(lengths), returns
+
+
+def plot_learning_curve(out: str | Path, rows: list[dict] | None = None, title: str = "") -> Path:
+    """Training episode returns against timesteps (Monitor logs in ``out/monitor``), a
+    moving average, and the held-out mean return of the best fixed baseline if ``rows``."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    out = Path(out)
+    x, y = monitor_returns(out / "monitor")
+    figure = Figure(figsize=(7, 4), dpi=80)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot(1, 1, 1)
+    axes.plot(x, y, ".", ms=3, alpha=0.4, label="training episode")
+    if y.size >= 5:
+        width = max(5, y.size // 20)
+        smooth = np.convolve(y, np.ones(width) / width, mode="valid")
+        axes.plot(x[width - 1 :], smooth, lw=2, label=f"moving mean ({width} episodes)")
+    for row in rows or []:
+        if row["role"] != "fixed" and row["role"] != "agent":
+            axes.axhline(row["return"], ls="--", lw=1, label=f"{row['policy']} (held-out)")
+    axes.set(xlabel="timesteps", ylabel="episode return", title=title)
+    axes.legend(fontsize=7)
+    figure.tight_layout()
+    path = out / "learning_curve.png"
+    figure.savefig(path)
+    return path
