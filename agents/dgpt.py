@@ -88,9 +88,9 @@ class DGPT(TrackerBase):
             terms of Theorem 3) instead of the one-step gamma of Theorems 1-2.
         gating: weigh each sensor's measurements by eqs. (27)-(28) (the default); False
             takes their unweighted mean (an ablation).
-        gate_threshold: None (the paper: soft gating only) or a hard gate in front of
-            eqs. (27)-(28): measurements whose Mahalanobis distance
-            sqrt(sum_axes (z - mu_*)^2 / (sigma_*^2 + sigma_n^2)) from their sensor's
+        gate_threshold: None (the paper: soft gating only) or a hard validation gate in
+            front of eqs. (27)-(28): measurements whose Mahalanobis distance
+            sqrt(sum_axes (z - mu_*)^2 / (sigma_*^2 + sigma_n^2)) from the aggregated
             prediction exceeds it are dropped before the weighted mean. The RL gating
             environment sets it step by step.
     """
@@ -216,7 +216,11 @@ class DGPT(TrackerBase):
         mean, var = self._gate_prediction(points, sensors)
         self.last_gated_out_ = 0
         if self.gate_threshold is not None and self.prior_next_ is not None:
-            inside = np.sum((points - mean) ** 2 / var, axis=1) <= self.gate_threshold**2
+            # a validation gate around the fused prediction: a sensor whose own model follows
+            # clutter must not vouch for its clutter
+            fused_var = self.prior_next_[1] + np.exp(self.log_params_[:, -1])
+            distance2 = np.sum((points - self.prior_next_[0]) ** 2 / fused_var, axis=1)
+            inside = distance2 <= self.gate_threshold**2
             self.last_gated_out_ = int(inside.size - inside.sum())
             points, sensors, mean, var = points[inside], sensors[inside], mean[inside], var[inside]
             if not points.shape[0]:

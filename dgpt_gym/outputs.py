@@ -283,6 +283,8 @@ def write_outputs(
     links = [
         f"[{path.relative_to(report_dir)}]({path.relative_to(report_dir)})" for path in written
     ]
+    if (report_dir / "analysis.md").exists():  # a hand-written reading of these numbers
+        links.insert(0, "[analysis.md](analysis.md): what these numbers mean")
     results = report_dir / "results.md"
     results.write_text(
         results_markdown(summaries, failures, len(sweep_units(grids)), command, links)

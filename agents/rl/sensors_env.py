@@ -65,6 +65,12 @@ class DGPTrackSensorsEnv(gym.Env):
     (a boolean per sensor), ``reports`` (the observation the tracker got), ``position`` and
     ``estimate``.
 
+    With ``clutter_sensors="all"`` every woken sensor reports clutter, and the DGPT tracker,
+    which makes every reporting sensor an expert (the paper's design, where only sensors
+    that see the target report clutter), follows the clutter-only sensors: measured NRMSE
+    about 42 % with the 8 or 16 nearest sensors woken, hard gate or not. The environment
+    supports it; the tracker inside does not cope with it.
+
     ## Starting State
 
     The inner environment's reset; the tracker starts empty.
@@ -77,11 +83,12 @@ class DGPTrackSensorsEnv(gym.Env):
 
     | argument | default | meaning |
     |---|---|---|
-    | ``n_candidates`` | 8 | k, the candidates per step (1..n_sensors) |
+    | ``n_candidates`` | 16 | k, the candidates per step (1..n_sensors). The 16 nearest sensors span about 140 m around the prediction (8: about 100 m), which is what a prediction may be off by after a coverage gap; fewer candidates lose the target there whatever the policy |
     | ``energy_cost`` | 0.02 | penalty per woken sensor and step, >= 0 |
     | ``error_scale`` | sensing range | metres per unit of error penalty, > 0 |
     | ``window`` | 3 | the DGPT tracker's window length |
     | ``aggregation``, ``inputs`` | ``"rbcm"``, ``"tgp"`` | the DGPT tracker |
+    | ``gate_threshold`` | None | the tracker's hard validation gate (:class:`agents.dgpt.DGPT`); None: the paper's soft gating only |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments, e.g. ``clutter_sensors="all"`` |
     """
 
@@ -90,12 +97,13 @@ class DGPTrackSensorsEnv(gym.Env):
 
     def __init__(
         self,
-        n_candidates: int = 8,
+        n_candidates: int = 16,
         energy_cost: float = 0.02,
         error_scale: float | None = None,
         window: int = 3,
         aggregation: str = "rbcm",
         inputs: str = "tgp",
+        gate_threshold: float | None = None,
         **env_kwargs,
     ) -> None:
         self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
@@ -111,7 +119,9 @@ class DGPTrackSensorsEnv(gym.Env):
             if error_scale is None
             else check_real("error_scale", error_scale, low=0.0, low_inclusive=False)
         )
-        self.tracker = DGPT(aggregation=aggregation, inputs=inputs, window=window)
+        self.tracker = DGPT(
+            aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
+        )
         self.action_space = spaces.MultiBinary(self.n_candidates)
         self.observation_space = spaces.Box(
             -OBSERVATION_HIGH,

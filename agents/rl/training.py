@@ -16,6 +16,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.rl.evaluation import (
     EVALUATION_SEEDS,
@@ -95,7 +96,8 @@ def train_agent(
     environments (each wrapped in a Monitor that logs to ``out/monitor``); save
     ``out/model.zip`` and ``out/config.json``. TensorBoard logs go to ``out/tensorboard``
     when tensorboard is installed. ``torch_threads``: the policy networks are tiny, and
-    more than one torch thread only adds synchronisation (``torch.set_num_threads``)."""
+    more than one torch or BLAS thread only adds synchronisation (``torch.set_num_threads``,
+    ``threadpoolctl``); both limits stay set for the process."""
     import torch
     from stable_baselines3.common.env_util import make_vec_env
 
@@ -113,6 +115,7 @@ def train_agent(
         )
     probe.close()
     torch.set_num_threads(check_integer("torch_threads", torch_threads, low=1))
+    threadpool_limits(limits=1)  # numpy's BLAS too: the trackers' matrices are tiny
     out = Path(out)
     (out / "monitor").mkdir(parents=True, exist_ok=True)
     venv = make_vec_env(
@@ -243,9 +246,11 @@ def plot_learning_curve(out: str | Path, rows: list[dict] | None = None, title: 
         width = max(5, y.size // 20)
         smooth = np.convolve(y, np.ones(width) / width, mode="valid")
         axes.plot(x[width - 1 :], smooth, lw=2, label=f"moving mean ({width} episodes)")
-    for row in rows or []:
-        if row["role"] != "fixed" and row["role"] != "agent":
-            axes.axhline(row["return"], ls="--", lw=1, label=f"{row['policy']} (held-out)")
+    baselines = [row for row in rows or [] if row["role"] not in ("fixed", "agent")]
+    for index, row in enumerate(baselines):
+        axes.axhline(
+            row["return"], ls="--", lw=1, color=f"C{index + 2}", label=f"{row['policy']} (held-out)"
+        )
     axes.set(xlabel="timesteps", ylabel="episode return", title=title)
     axes.legend(fontsize=7)
     figure.tight_layout()
