@@ -83,3 +83,24 @@ def test_bench_prints_its_figures():
     assert ratio and float(ratio.group(1)) > 0
     step = re.search(r"DGPT-RBCM step, median \(ms, goal <= 0.5\): ([\d.]+)", result.stdout)
     assert step and float(step.group(1)) > 0
+
+
+def test_train_rl_trains_saves_and_compares(tmp_path):
+    result = run_script(
+        "train_rl.py",
+        *("--env", "sensors", "--algo", "a2c", "--timesteps", "64", "--n-envs", "1"),
+        *("--env-kwargs", "n_candidates=2", "max_episode_steps=15"),
+        *("--eval-episodes", "2", "--out", str(tmp_path), "--no-progress"),
+    )
+    assert result.returncode == 0, result.stderr
+    for name in ("model.zip", "config.json", "comparison.md", "learning_curve.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    rows = re.findall(r"^\| (trained agent|nearest 1|nearest 2|random) \| ", result.stdout, re.M)
+    assert sorted(rows) == ["nearest 1", "nearest 2", "random", "trained agent"]
+
+
+def test_train_rl_rejects_bad_choices():
+    result = run_script("train_rl.py", "--env", "kalman")
+    assert result.returncode == 2 and "window" in result.stderr
+    result = run_script("train_rl.py", "--env", "gating", "--algo", "dqn", "--timesteps", "8")
+    assert result.returncode == 2 and "Discrete" in result.stderr
