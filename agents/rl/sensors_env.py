@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from scipy.spatial import cKDTree
 
 from agents.dgpt import DGPT
-from dgpt_gym.env import DGPTrackEnv
+from agents.rl.base import TrackerInsideEnv
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["DGPTrackSensorsEnv", "filter_reports"]
@@ -31,7 +30,7 @@ def filter_reports(observation: dict, woken: np.ndarray) -> dict:
     return {"measurements": measurements, "sensor": sensor, "mask": new_mask, "t": observation["t"]}
 
 
-class DGPTrackSensorsEnv(gym.Env):
+class DGPTrackSensorsEnv(TrackerInsideEnv):
     """Wake the sensors that should report; only woken sensors report.
 
     ## Description
@@ -92,7 +91,6 @@ class DGPTrackSensorsEnv(gym.Env):
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments, e.g. ``clutter_sensors="all"`` |
     """
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
     knob = "n_woken"  # the info key of what the agent sets (for the evaluation tables)
 
     def __init__(
@@ -106,22 +104,16 @@ class DGPTrackSensorsEnv(gym.Env):
         gate_threshold: float | None = None,
         **env_kwargs,
     ) -> None:
-        self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
-        self.render_mode = self.inner.render_mode
+        tracker = DGPT(
+            aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
+        )
+        super().__init__(tracker, error_scale, env_kwargs)
         self.n_candidates = check_integer("n_candidates", n_candidates, low=1)
         if self.n_candidates > self.inner.n_sensors:
             raise ValueError(
                 f"n_candidates must be at most n_sensors={self.inner.n_sensors}; got {n_candidates!r}"
             )
         self.energy_cost = check_real("energy_cost", energy_cost, low=0.0)
-        self.error_scale = (
-            self.inner.sensing_range
-            if error_scale is None
-            else check_real("error_scale", error_scale, low=0.0, low_inclusive=False)
-        )
-        self.tracker = DGPT(
-            aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
-        )
         self.action_space = spaces.MultiBinary(self.n_candidates)
         self.observation_space = spaces.Box(
             -OBSERVATION_HIGH,
@@ -129,22 +121,11 @@ class DGPTrackSensorsEnv(gym.Env):
             shape=(4 * self.n_candidates + 3,),
             dtype=np.float32,
         )
-        self._pending = None
-
-    def render(self):
-        """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""
-        return self.inner.render()
-
-    def close(self) -> None:
-        self.inner.close()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        observation, info = self.inner.reset(seed=seed, options=options)
-        self.tracker.reset(info["problem_spec"], seed=seed)
+        info = self._reset_inner(seed, options)
         self._positions = self.inner.network.positions
         self._tree = cKDTree(self._positions)
-        self._pending = observation
         self._predicted = info["position"].copy()  # the hand-over cue (see Description)
         self._predicted_std = np.full(2, self.inner.sensing_range)
         n = self.inner.n_sensors
@@ -171,8 +152,7 @@ class DGPTrackSensorsEnv(gym.Env):
         return np.clip(vector, -OBSERVATION_HIGH, OBSERVATION_HIGH).astype(np.float32)
 
     def step(self, action):
-        if self._pending is None:
-            raise gym.error.ResetNeeded("Cannot call step() before reset()")
+        self._check_started()
         bits = np.asarray(action).reshape(-1)
         if bits.shape != (self.n_candidates,) or not np.all((bits == 0) | (bits == 1)):
             raise ValueError(
@@ -188,8 +168,7 @@ class DGPTrackSensorsEnv(gym.Env):
         self._last_count[woken_sensors] = counts[woken_sensors]
         self._last_woken[woken_sensors] = self._step
         self._silent = 0 if n_reports else self._silent + 1
-        observation, _, terminated, truncated, inner_info = self.inner.step(estimate.mean)
-        self._pending = None if truncated else observation
+        _, terminated, truncated, inner_info = self._score(estimate)
         self._step += 1
         if estimate.prior_next is not None:
             self._predicted = np.asarray(estimate.prior_next[0], dtype=float).copy()

@@ -7,15 +7,15 @@ measurements with it, and the tracker's estimate is scored.
 
 from __future__ import annotations
 
+import abc
 import math
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from agents.dgpt import DGPT
+from agents.rl.base import TrackerInsideEnv
 from agents.rl.features import FEATURE_HIGH, FEATURE_NAMES, tracker_features
-from dgpt_gym.env import DGPTrackEnv
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["TrackerTuningEnv", "DGPTrackWindowEnv", "DGPTrackGatingEnv", "DEFAULT_WINDOWS"]
@@ -34,10 +34,9 @@ _REWARD_DOC = """
     ``position`` and the ``estimate``."""
 
 
-class TrackerTuningEnv(gym.Env):
+class TrackerTuningEnv(TrackerInsideEnv, abc.ABC):
     """Shared machinery of the tuning environments (subclasses define the action)."""
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
     knob = "window"  # the info key of what the agent sets (for the evaluation tables)
 
     def __init__(
@@ -51,27 +50,21 @@ class TrackerTuningEnv(gym.Env):
         error_scale: float | None = None,
         **env_kwargs,
     ) -> None:
-        self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
-        self.render_mode = self.inner.render_mode
-        self.tracker = DGPT(
+        tracker = DGPT(
             aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
         )
+        super().__init__(tracker, error_scale, env_kwargs)
         self.max_window = check_integer("max_window", max_window, low=window)
         self.compute_weight = check_real("compute_weight", compute_weight, low=0.0)
-        self.error_scale = (
-            self.inner.sensing_range
-            if error_scale is None
-            else check_real("error_scale", error_scale, low=0.0, low_inclusive=False)
-        )
         self.observation_space = spaces.Box(
             0.0, FEATURE_HIGH, shape=(len(FEATURE_NAMES),), dtype=np.float32
         )
-        self._pending = None
 
     # -- the knob the subclass exposes ----------------------------------------------------
 
+    @abc.abstractmethod
     def _apply_action(self, action) -> None:
-        raise NotImplementedError
+        """Set the tracker's knob from the agent's action (validating it)."""
 
     def _reset_knob(self) -> None:
         """Return the knob to its value at the start of an episode."""
@@ -84,31 +77,19 @@ class TrackerTuningEnv(gym.Env):
 
     # -- Gymnasium API --------------------------------------------------------------------
 
-    def render(self):
-        """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""
-        return self.inner.render()
-
-    def close(self) -> None:
-        self.inner.close()
-
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        observation, info = self.inner.reset(seed=seed, options=options)
-        self.tracker.reset(info["problem_spec"], seed=seed)
+        info = self._reset_inner(seed, options)
         self._reset_knob()
-        self._pending = observation
         self._silent = 0
         return self._features(None), {"position": info["position"]}
 
     def step(self, action):
-        if self._pending is None:
-            raise gym.error.ResetNeeded("Cannot call step() before reset()")
+        self._check_started()
         self._apply_action(action)
         n_measurements = int(np.sum(self._pending["mask"]))
         estimate = self.tracker.update(self._pending)
         self._silent = 0 if n_measurements else self._silent + 1
-        observation, _, terminated, truncated, inner_info = self.inner.step(estimate.mean)
-        self._pending = None if truncated else observation
+        observation, terminated, truncated, inner_info = self._score(estimate)
         error = inner_info["error"]
         n_experts = self.tracker.n_experts_
         window = self.tracker.window_.length

@@ -1,0 +1,57 @@
+"""What every RL environment of :mod:`agents.rl` shares: a ``DGPTrack-v0`` inside, a DGPT
+tracker that processes its measurements, and the scoring of the tracker's estimate."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from agents.dgpt import DGPT
+from dgpt_gym.env import DGPTrackEnv
+from dgpt_gym.validation import check_real
+
+__all__ = ["TrackerInsideEnv"]
+
+
+class TrackerInsideEnv(gym.Env):
+    """Base of the RL environments: owns the inner env (``self.inner``, which also draws the
+    scene for ``render``), the tracker (``self.tracker``), the measurements of the coming
+    step (``self._pending``) and the error normalisation (``self.error_scale``)."""
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+
+    def __init__(self, tracker: DGPT, error_scale: float | None, env_kwargs: dict) -> None:
+        self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
+        self.render_mode = self.inner.render_mode
+        self.tracker = tracker
+        self.error_scale = (
+            self.inner.sensing_range
+            if error_scale is None
+            else check_real("error_scale", error_scale, low=0.0, low_inclusive=False)
+        )
+        self._pending = None
+
+    def render(self):
+        """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""
+        return self.inner.render()
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def _reset_inner(self, seed: int | None, options: dict | None) -> dict:
+        """Reset the inner env and the tracker; returns the inner reset info."""
+        gym.Env.reset(self, seed=seed)
+        observation, info = self.inner.reset(seed=seed, options=options)
+        self.tracker.reset(info["problem_spec"], seed=seed)
+        self._pending = observation
+        return info
+
+    def _check_started(self) -> None:
+        if self._pending is None:
+            raise gym.error.ResetNeeded("Cannot call step() before reset() or after the end")
+
+    def _score(self, estimate) -> tuple[dict, bool, bool, dict]:
+        """Step the inner env with the tracker's estimate: returns the next step's
+        measurements, terminated, truncated and the inner info (with ``error``)."""
+        observation, _, terminated, truncated, info = self.inner.step(estimate.mean)
+        self._pending = None if truncated else observation
+        return observation, terminated, truncated, info
