@@ -54,7 +54,7 @@ def tracker_id(approach: str, inputs: str) -> str:
 
 
 def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
-    """One of Tables II-IX: ``rows`` are :func:`~dgpt_gym.evaluation.evaluate_grid` rows."""
+    """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store`)."""
     ours = {
         (r["tracker"], r["noise_std"], r["clutter_rate"]): r
         for r in rows

@@ -189,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
             sweep = run_sweep(
                 grids, out, args.workers, args.scheduler, progress=not args.no_progress
             )
+        except ImportError as error:  # --scheduler without the cluster extra
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         except KeyboardInterrupt:
             print(
                 f"\ninterrupted: every finished run is in {out}/results.sqlite; "
