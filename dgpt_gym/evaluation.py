@@ -128,15 +128,6 @@ def summarize_runs(rows: list[dict[str, float]]) -> dict[str, float]:
     return summary
 
 
-def _single_threaded_blas() -> None:
-    """Worker initializer: one BLAS thread per process. The GP matrices are tiny, and
-    several processes each running a multi-threaded BLAS on the same cores spin against
-    each other (measured: 2 workers ran 5x slower than 1 without this)."""
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
 def format_nrmse_table(rows: list[dict]) -> str:
     """Markdown table of mean NRMSE (percent) per cell and axis, the paper's unit."""
     header = "| tracker | scenario | noise_std | clutter_rate | NRMSE X % | NRMSE Y % | runs |"

@@ -200,7 +200,7 @@ def results_markdown(
     return "\n".join(lines + [""])
 
 
-def _figure_run(grids: list[Grid], summaries: list[dict]):
+def _figure_run(units: list, summaries: list[dict]):
     """The unit of Figs. 4-7: DGPT-RBCM (else the first tracker with a UCB) on S1 (else the
     first scenario), the lowest noise level and clutter rate, the first seed."""
     with_ucb = [row for row in summaries if np.isfinite(row.get("ucb_coverage_x", np.nan))]
@@ -208,7 +208,7 @@ def _figure_run(grids: list[Grid], summaries: list[dict]):
         return None
     trackers = [row["tracker"] for row in with_ucb]
     tracker = "dgpt-rbcm" if "dgpt-rbcm" in trackers else trackers[0]
-    units = [unit for unit in sweep_units(grids) if unit.tracker == tracker]
+    units = [unit for unit in units if unit.tracker == tracker]
     scenarios = {unit.env_kwargs["scenario"] for unit in units}
     scenario = "S1" if "S1" in scenarios else sorted(scenarios)[0]
     units = [unit for unit in units if unit.env_kwargs["scenario"] == scenario]
@@ -261,7 +261,8 @@ def write_outputs(
         hybrid.write_text(report.hybrid_comparison_markdown(fig8, command))
         written.append(hybrid)
 
-    unit = _figure_run(grids, summaries)
+    units = sweep_units(grids)
+    unit = _figure_run(units, summaries)
     if unit is not None:
         tracker = TrackerSpec(unit.tracker, unit.entry_point).load()(**unit.tracker_kwargs)
         env = gym.make("DGPTrack-v0", **unit.env_kwargs)
@@ -286,7 +287,5 @@ def write_outputs(
     if (report_dir / "analysis.md").exists():  # a hand-written reading of these numbers
         links.insert(0, "[analysis.md](analysis.md): what these numbers mean")
     results = report_dir / "results.md"
-    results.write_text(
-        results_markdown(summaries, failures, len(sweep_units(grids)), command, links)
-    )
+    results.write_text(results_markdown(summaries, failures, len(units), command, links))
     return [results, *written]

@@ -9,10 +9,18 @@ import numpy as np
 from dgpt_gym.network import SensorNetwork
 from dgpt_gym.scenarios import SCENARIOS
 
-__all__ = ["plot_scenarios", "plot_ucb_vs_ci", "plot_training_time", "read_training_time"]
+__all__ = [
+    "new_figure",
+    "save_figure",
+    "plot_scenarios",
+    "plot_ucb_vs_ci",
+    "plot_training_time",
+    "read_training_time",
+]
 
 
-def _new_figure(size: tuple[float, float], dpi: int = 70):
+def new_figure(size: tuple[float, float], dpi: int = 70):
+    """A matplotlib Figure on the Agg canvas (no display, no pyplot state)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -21,7 +29,8 @@ def _new_figure(size: tuple[float, float], dpi: int = 70):
     return figure
 
 
-def _save(figure, path: str | Path) -> Path:
+def save_figure(figure, path: str | Path) -> Path:
+    """Lay out ``figure`` and write it to ``path`` (folders created); returns the path."""
     figure.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -33,7 +42,7 @@ def plot_scenarios(path: str | Path, layout_seed: int = 0, n_random: int = 3) ->
     """The paper's Fig. 3: each scenario's reference trajectory over the sensor field, with
     ``n_random`` random draws of the same model in grey. Writes a PNG to ``path``."""
     network = SensorNetwork.uniform(250, 1000.0, 50.0, layout_seed)
-    figure = _new_figure((9, 9))
+    figure = new_figure((9, 9))
     rng = np.random.default_rng(0)
     for index, (name, scenario) in enumerate(SCENARIOS.items()):
         axes = figure.add_subplot(2, 2, index + 1)
@@ -54,7 +63,7 @@ def plot_scenarios(path: str | Path, layout_seed: int = 0, n_random: int = 3) ->
         "Reference trajectories (red, start marked), random draws (grey), sensors (triangles)",
         fontsize=9,
     )
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_ucb_vs_ci(result, path: str | Path, title: str) -> Path:
@@ -64,7 +73,7 @@ def plot_ucb_vs_ci(result, path: str | Path, title: str) -> Path:
     band covers the truth."""
     from dgpt_gym.metrics import CI_SIGMAS
 
-    figure = _new_figure((11, 6.5))
+    figure = new_figure((11, 6.5))
     steps = np.arange(result.truth.shape[0])
     bands = [
         ("UCB (Theorem 2)", result.ucb),
@@ -87,7 +96,7 @@ def plot_ucb_vs_ci(result, path: str | Path, title: str) -> Path:
             if row == column == 0:
                 axes.legend(fontsize=7)
     figure.suptitle(title, fontsize=10)
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def read_training_time(path: str | Path) -> list[dict]:
@@ -104,7 +113,7 @@ def read_training_time(path: str | Path) -> list[dict]:
 def plot_training_time(rows: list[dict], path: str | Path) -> Path:
     """The paper's Fig. 2: time of the log likelihood and its gradient against the training
     size N, full GP (M = 1) and DGP with M experts, log-log."""
-    figure = _new_figure((6, 4), dpi=80)
+    figure = new_figure((6, 4), dpi=80)
     axes = figure.add_subplot(1, 1, 1)
     for m in sorted({row["M"] for row in rows}):
         points = [(row["N"], row["seconds"]) for row in rows if row["M"] == m]
@@ -117,4 +126,4 @@ def plot_training_time(rows: list[dict], path: str | Path) -> Path:
         title="Training time (paper Fig. 2): f(x) = 5 x1^2 + sin(12 x2)",
     )
     axes.legend()
-    return _save(figure, path)
+    return save_figure(figure, path)

@@ -232,12 +232,10 @@ def hybrid_comparison_markdown(rows: list[dict], command: str) -> str:
 
 def plot_hybrid_comparison(rows: list[dict], path: str | Path) -> Path:
     """Bar charts of NRMSE and STD of RMSE per scenario, axis and tracker (paper Fig. 8)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from dgpt_gym.plots import new_figure, save_figure
 
     trackers, scenarios, by_key = _comparison_layout(rows)
-    figure = Figure(figsize=(10, 6), dpi=70)
-    FigureCanvasAgg(figure)
+    figure = new_figure((10, 6))
     panels = [
         ("nrmse_x", "(a) NRMSE X, %", 100),
         ("nrmse_y", "(b) NRMSE Y, %", 100),
@@ -257,8 +255,4 @@ def plot_hybrid_comparison(rows: list[dict], path: str | Path) -> Path:
         axes.set_title(title, fontsize=9)
         if index == 0:
             axes.legend(fontsize=7)
-    figure.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path)
-    return path
+    return save_figure(figure, path)

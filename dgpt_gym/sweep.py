@@ -18,7 +18,7 @@ from pathlib import Path
 
 import gymnasium as gym
 
-from dgpt_gym.evaluation import _single_threaded_blas, run_episode, summarize_runs
+from dgpt_gym.evaluation import run_episode, summarize_runs
 from dgpt_gym.store import ResultsStore, run_key
 from dgpt_gym.validation import check_integer, check_real
 
@@ -145,6 +145,15 @@ PAPER_SWEEP = (
 """``--paper``: Tables II-IX (six GP trackers, sigma_z in {1, 2, 4}, clutter 1 and 5) and the
 cell of Fig. 8 (sigma_z = 1, clutter 5) for the hybrid filter in both variants and the CPF,
 100 Monte Carlo runs each."""
+
+
+def _single_threaded_blas() -> None:
+    """Worker initializer: one BLAS thread per process. The GP matrices are tiny, and
+    several processes each running a multi-threaded BLAS on the same cores spin against
+    each other (measured: 2 workers ran 5x slower than 1 without this)."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
 
 
 def sweep_units(grids: Iterable[Grid]) -> list[RunUnit]:

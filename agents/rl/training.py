@@ -233,13 +233,11 @@ def monitor_returns(folder: Path) -> tuple[np.ndarray, np.ndarray]:
 def plot_learning_curve(out: str | Path, rows: list[dict] | None = None, title: str = "") -> Path:
     """Training episode returns against timesteps (Monitor logs in ``out/monitor``), a
     moving average, and the held-out mean return of the best fixed baseline if ``rows``."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from dgpt_gym.plots import new_figure, save_figure
 
     out = Path(out)
     x, y = monitor_returns(out / "monitor")
-    figure = Figure(figsize=(7, 4), dpi=80)
-    FigureCanvasAgg(figure)
+    figure = new_figure((7, 4), dpi=80)
     axes = figure.add_subplot(1, 1, 1)
     axes.plot(x, y, ".", ms=3, alpha=0.4, label="training episode")
     if y.size >= 5:
@@ -253,7 +251,4 @@ def plot_learning_curve(out: str | Path, rows: list[dict] | None = None, title: 
         )
     axes.set(xlabel="timesteps", ylabel="episode return", title=title)
     axes.legend(fontsize=7)
-    figure.tight_layout()
-    path = out / "learning_curve.png"
-    figure.savefig(path)
-    return path
+    return save_figure(figure, out / "learning_curve.png")
