@@ -166,7 +166,9 @@ def build_grids(args: argparse.Namespace) -> list[Grid]:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    command = "python scripts/evaluate.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    # the outputs quote the command that runs the sweep (--report-only writes the same files)
+    arguments = [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--report-only"]
+    command = "python scripts/evaluate.py " + " ".join(arguments)
     try:
         if args.tune_windows:
             best, rows = tune_windows(
