@@ -26,13 +26,15 @@ the distance in time. No NaN is ever returned.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from agents import aggregation as agg
 from agents import gp
 from agents.base import Estimate, TrackerBase
 from agents.gating import gate_measurements
-from agents.window import PRIOR_MEANS, SlidingWindow, StepRecord
+from agents.window import PRIOR_MEANS, ExpertData, SlidingWindow, StepRecord, padded_size
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
@@ -42,6 +44,7 @@ __all__ = [
     "HYPERPARAMETER_BOUNDS",
     "FIT_GRADIENT_TOLERANCE",
     "INPUTS",
+    "update_batch",
 ]
 
 INPUTS = ("tgp", "stgp")
@@ -161,10 +164,10 @@ class DGPT(TrackerBase):
         self.expert_next_var_ = np.empty((0, 2))
         self.n_experts_ = 0
         self.fit_failures_ = 0
-        self.last_fit_: gp.FitResult | None = None
         self.last_innovation_ = np.empty((0, 2))  # gated summaries - their predictions
         self.last_gated_out_ = 0  # measurements the hard gate dropped at the last step
-        self._model = None
+        self._data: ExpertData | None = None  # the window's expert data of the last step
+        self.step_ = -1
 
     def set_window(self, window: int, keep: int | None = None) -> None:
         """Use the window length C = ``window`` from now on in this episode (the RL window
@@ -175,20 +178,23 @@ class DGPT(TrackerBase):
         self.window_.capacity = max(window, keep or 0, self.window_.capacity)
 
     def update(self, obs: dict) -> Estimate:
-        if self.spec_ is None:
-            raise RuntimeError("call reset(spec) before update(obs)")
-        step = int(obs["t"])
-        mask = np.asarray(obs["mask"]).astype(bool)
-        points = np.asarray(obs["measurements"], dtype=float)[mask]
-        sensors = np.asarray(obs["sensor"])[mask]
-        recorded = bool(points.shape[0]) and self._record(step, points, sensors)
-        data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
-        if data is None:  # nothing seen yet in this episode
-            centre = np.full(2, self.spec_.area / 2.0)
-            return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
-        if recorded and data.n_points >= 3:
-            self._learn(data)
-        return self._predict(step, data)
+        return update_batch([self], [obs])[0]
+
+    @classmethod
+    def update_batch(cls, trackers: Sequence[DGPT], observations: Sequence[dict]) -> list[Estimate]:
+        """:func:`update_batch`: one step of many episodes in lockstep."""
+        return update_batch(trackers, observations)
+
+    def _numerics_key(self) -> tuple:
+        """What the batched learning and prediction share within a group of trackers."""
+        return (
+            type(self),
+            self.aggregation,
+            self.inputs,
+            self.delta,
+            self.anytime_ucb,
+            self.max_iterations,
+        )
 
     # -- steps of the algorithm -----------------------------------------------------------
 
@@ -235,63 +241,41 @@ class DGPT(TrackerBase):
         self.window_.add(StepRecord(step, gated.sensors, gated.summaries, previous))
         return True
 
-    def _learn(self, data) -> None:
-        result = gp.fit_hyperparameters(
-            self.log_params_,
-            data.training,
-            bounds=self.bounds(),
-            max_iterations=self.max_iterations,
-            gradient_tolerance=FIT_GRADIENT_TOLERANCE,
-        )
-        self.last_fit_ = result
-        self.log_params_ = result.log_params
-        self.fit_failures_ += result.kept_start
+    def _window_data(self, obs: dict) -> Estimate | tuple[ExpertData, bool]:
+        """Steps 1-2 of one episode: gate the step's measurements into the window and
+        arrange it into expert arrays. Returns the estimate when there is no data yet, else
+        the data and whether the hyperparameters are to be re-learnt (new summaries and at
+        least three points)."""
+        if self.spec_ is None:
+            raise RuntimeError("call reset(spec) before update(obs)")
+        step = int(obs["t"])
+        mask = np.asarray(obs["mask"]).astype(bool)
+        points = np.asarray(obs["measurements"], dtype=float)[mask]
+        sensors = np.asarray(obs["sensor"])[mask]
+        recorded = bool(points.shape[0]) and self._record(step, points, sensors)
+        data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
+        if data is None:  # nothing seen yet in this episode
+            centre = np.full(2, self.spec_.area / 2.0)
+            return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+        self.step_ = step
+        return data, recorded and data.n_points >= 3
 
-    def _test_inputs(self, data, relative_time: float, previous: np.ndarray) -> np.ndarray:
-        """(2, M, 1, d) test inputs at ``relative_time`` with spatial input ``previous`` (2,)."""
-        n_experts = data.mask.shape[0]
-        time = np.full((2, n_experts, 1, 1), relative_time)
+    def _test_inputs(self, data: ExpertData, relative_time: float, previous: np.ndarray):
+        """(E, 2, M, 1, d) test inputs at ``relative_time`` with spatial inputs ``previous``
+        (E, 2) for stacked ``data``."""
+        time = np.full(data.X.shape[:-2] + (1, 1), relative_time)
         if not self._spatial:
             return time
-        space = np.broadcast_to((previous - data.intercept)[:, None, None, None], time.shape)
+        space = np.broadcast_to((previous - data.intercept)[:, :, None, None, None], time.shape)
         return np.concatenate([space, time], axis=-1)
 
-    def _aggregate(self, mean, var, prior_var, data, relative_time: float, residual_var):
-        """Aggregate the experts' residual predictions and add back the prior mean; its
-        estimation variance adds to the aggregate's (:meth:`ExpertData.prior_mean_variance`)."""
-        combined = agg.aggregate(self.aggregation, mean, var, prior_var)
+    def _aggregate(self, mean, var, prior_var, data, relative_time, residual_var, valid):
+        """Aggregate the experts' residual predictions (E, 2, M) and add back the prior
+        mean; its estimation variance adds to the aggregate's
+        (:meth:`ExpertData.prior_mean_variance`)."""
+        combined = agg.aggregate(self.aggregation, mean, var, prior_var, valid)
         trend_var = data.prior_mean_variance(relative_time, residual_var)
         return combined.mean + data.prior_mean(relative_time), combined.var + trend_var
-
-    def _predict(self, step: int, data) -> Estimate:
-        log_params = self.log_params_
-        try:
-            fact = gp.factorize(log_params, data.training)
-        except gp.NumericalError:
-            log_params = self.log_params_ = self.initial_log_params()
-            fact = gp.factorize(log_params, data.training)
-        prior_var = np.exp(log_params[:, 0])
-        residual_var = prior_var + np.exp(log_params[:, -1])  # marginal variance of a summary
-        self._model = (data, fact, log_params, prior_var, residual_var)
-        previous = self.estimate_ if self.estimate_ is not None else data.prior_mean(-1.0)
-        x_now = self._test_inputs(data, 0.0, previous)
-        mean_now, var_now = gp.predict(log_params, data.training, None, None, x_now, fact)
-        estimate, estimate_var = self._aggregate(
-            mean_now[..., 0], var_now[..., 0], prior_var, data, 0.0, residual_var
-        )
-        # The theorems' expert variances are those of the coordinate: residual GP plus trend.
-        trend_var = data.prior_mean_variance(0.0, residual_var)
-        ucb = agg.ucb_half_width(
-            self.aggregation,
-            var_now[..., 0] + trend_var[:, None],
-            prior_var + trend_var,
-            self.delta,
-            step=step + 1 if self.anytime_ucb else None,
-        )
-        self.n_experts_ = data.sensors.size
-        self.estimate_ = estimate
-        prior_next = self._predict_next()
-        return Estimate(estimate.copy(), estimate_var, ucb, prior_next)
 
     def set_estimate(self, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Take ``estimate`` (2,) as this step's estimate (the hybrid filter feeds its
@@ -299,22 +283,149 @@ class DGPT(TrackerBase):
         estimate is the spatial input of that prediction, which is recomputed; with TGP it
         does not depend on the estimate."""
         self.estimate_ = np.asarray(estimate, dtype=float).copy()
-        return self._predict_next() if self._spatial else self.prior_next_
-
-    def _predict_next(self) -> tuple[np.ndarray, np.ndarray]:
-        """The aggregated next-step prediction from ``estimate_`` (stored in ``prior_next_``)
-        and each expert's, which gate the next step's measurements."""
-        data, fact, log_params, prior_var, residual_var = self._model
-        x_next = self._test_inputs(data, 1.0, self.estimate_)
-        mean_next, var_next = gp.predict(log_params, data.training, None, None, x_next, fact)
-        self.prior_next_ = self._aggregate(
-            mean_next[..., 0], var_next[..., 0], prior_var, data, 1.0, residual_var
-        )
-        if self.pooled:
-            self.expert_sensors_ = np.empty(0, dtype=np.int64)
-        else:
-            self.expert_sensors_ = data.sensors
-            self.expert_next_mean_ = (mean_next[..., 0] + data.prior_mean(1.0)[:, None]).T
-            next_trend_var = data.prior_mean_variance(1.0, residual_var)
-            self.expert_next_var_ = (var_next[..., 0] + next_trend_var[:, None]).T
+        if self._spatial:
+            group = _Group([self], [self._data])
+            group.predict_next(self.log_params_[None], group.factorize(self.log_params_[None]))
         return self.prior_next_
+
+
+class _Group:
+    """Episodes whose tracker numerics agree (:meth:`DGPT._numerics_key`) and whose expert
+    arrays pad to the same shape (:func:`agents.window.padded_size`): their learning and
+    prediction run as one batch, each episode exactly as it would alone."""
+
+    def __init__(self, trackers: Sequence[DGPT], data: Sequence[ExpertData]) -> None:
+        n_experts = padded_size(data[0].mask.shape[0])
+        n_points = padded_size(data[0].mask.shape[1])
+        self.trackers, self.own_data = list(trackers), list(data)
+        self.first = self.trackers[0]
+        self.data = ExpertData.stack([item.padded(n_experts, n_points) for item in data])
+        self.valid = self.data.experts[:, None, :]  # (E, 1, M)
+
+    def fit(self, log_params: np.ndarray) -> np.ndarray:
+        """Step 3: the warm-started maximum-likelihood fit of every episode's (2, p)."""
+        result = gp.fit_hyperparameters(
+            log_params,
+            self.data.training,
+            bounds=self.first.bounds(),
+            max_iterations=self.first.max_iterations,
+            gradient_tolerance=FIT_GRADIENT_TOLERANCE,
+        )
+        for tracker, kept in zip(self.trackers, result.kept_start):
+            tracker.fit_failures_ += int(np.any(kept))
+        return result.log_params
+
+    def factorize(self, log_params: np.ndarray) -> gp.Factorization:
+        """Factorize every episode's covariances; an episode whose matrices stay indefinite
+        even with jitter restarts from :data:`INITIAL_HYPERPARAMETERS` (``log_params`` is
+        changed in place)."""
+        fact = gp.factorize(log_params, self.data.training)
+        broken = np.any(fact.failed, axis=-1)
+        if np.any(broken):
+            log_params[broken] = self.first.initial_log_params()
+            fact = gp.factorize(log_params, self.data.training)
+            fact.check()
+        return fact
+
+    def predict(self, steps: np.ndarray, log_params: np.ndarray) -> list[Estimate]:
+        """Step 4 at the current step, then the next-step prediction that gates the next
+        measurements."""
+        first = self.first
+        fact = self.factorize(log_params)
+        prior_var = np.exp(log_params[..., 0])
+        residual_var = prior_var + np.exp(log_params[..., -1])  # marginal variance of a summary
+        previous = np.stack(
+            [
+                tracker.estimate_ if tracker.estimate_ is not None else item.prior_mean(-1.0)
+                for tracker, item in zip(self.trackers, self.own_data)
+            ]
+        )
+        x_now = first._test_inputs(self.data, 0.0, previous)
+        mean_now, var_now = gp.predict(log_params, self.data.training, None, None, x_now, fact)
+        estimate, estimate_var = first._aggregate(
+            mean_now[..., 0], var_now[..., 0], prior_var, self.data, 0.0, residual_var, self.valid
+        )
+        # The theorems' expert variances are those of the coordinate: residual GP plus trend.
+        trend_var = self.data.prior_mean_variance(0.0, residual_var)
+        ucb = agg.ucb_half_width(
+            first.aggregation,
+            var_now[..., 0] + trend_var[..., None],
+            prior_var + trend_var,
+            first.delta,
+            valid=self.valid,
+            step=(steps + 1)[:, None] if first.anytime_ucb else None,
+        )
+        for index, (tracker, item) in enumerate(zip(self.trackers, self.own_data)):
+            tracker.log_params_ = log_params[index].copy()
+            tracker.n_experts_ = item.sensors.size
+            tracker.estimate_ = estimate[index].copy()
+            tracker._data = item
+        self.predict_next(log_params, fact)
+        return [
+            Estimate(estimate[i].copy(), estimate_var[i], ucb[i], self.trackers[i].prior_next_)
+            for i in range(len(self.trackers))
+        ]
+
+    def predict_next(self, log_params: np.ndarray, fact: gp.Factorization) -> None:
+        """The aggregated next-step prediction from each tracker's ``estimate_`` (stored in
+        ``prior_next_``) and each expert's, which gate the next step's measurements."""
+        first = self.first
+        prior_var = np.exp(log_params[..., 0])
+        residual_var = prior_var + np.exp(log_params[..., -1])
+        estimates = np.stack([tracker.estimate_ for tracker in self.trackers])
+        x_next = first._test_inputs(self.data, 1.0, estimates)
+        mean, var = gp.predict(log_params, self.data.training, None, None, x_next, fact)
+        mean, var = mean[..., 0], var[..., 0]
+        prior_next = first._aggregate(
+            mean, var, prior_var, self.data, 1.0, residual_var, self.valid
+        )
+        trend_mean = self.data.prior_mean(1.0)
+        trend_var = self.data.prior_mean_variance(1.0, residual_var)
+        for index, (tracker, item) in enumerate(zip(self.trackers, self.own_data)):
+            tracker.prior_next_ = (prior_next[0][index], prior_next[1][index])
+            if first.pooled:
+                tracker.expert_sensors_ = np.empty(0, dtype=np.int64)
+                continue
+            experts = item.sensors.size
+            tracker.expert_sensors_ = item.sensors
+            tracker.expert_next_mean_ = (mean[index, :, :experts] + trend_mean[index][:, None]).T
+            tracker.expert_next_var_ = (var[index, :, :experts] + trend_var[index][:, None]).T
+
+
+def update_batch(trackers: Sequence[DGPT], observations: Sequence[dict]) -> list[Estimate]:
+    """One step of many DGPT episodes in lockstep: ``trackers[i]`` takes
+    ``observations[i]``; returns their estimates, each identical to
+    ``trackers[i].update(observations[i])`` (which is this with one episode).
+
+    Gating and the window (steps 1-2) run per episode; learning and prediction (steps 3-4)
+    run for each group of episodes with the same numerics and padded shape at once
+    (:class:`_Group`), which is where a single episode spends most of its time on
+    per-call overhead. The trackers may differ in every setting.
+    """
+    if len(trackers) != len(observations):
+        raise ValueError(
+            f"trackers and observations must have the same length; got {len(trackers)} "
+            f"and {len(observations)}"
+        )
+    estimates: list[Estimate | None] = [None] * len(trackers)
+    groups: dict[tuple, list[tuple[int, DGPT, ExpertData]]] = {}
+    for index, (tracker, obs) in enumerate(zip(trackers, observations)):
+        prepared = tracker._window_data(obs)
+        if isinstance(prepared, Estimate):
+            estimates[index] = prepared
+            continue
+        data, learn = prepared
+        shape = tuple(padded_size(size) for size in data.mask.shape)
+        groups.setdefault((tracker._numerics_key(), shape, learn), []).append(
+            (index, tracker, data)
+        )
+    for (_, _, learn), members in groups.items():
+        indices, members_trackers, members_data = zip(*members)
+        group = _Group(members_trackers, members_data)
+        log_params = np.stack([tracker.log_params_ for tracker in members_trackers])
+        if learn:
+            log_params = group.fit(log_params)
+        steps = np.array([tracker.step_ for tracker in members_trackers])
+        for index, estimate in zip(indices, group.predict(steps, log_params)):
+            estimates[index] = estimate
+    return estimates

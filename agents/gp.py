@@ -20,8 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 from scipy.linalg import lapack
+
+from agents import optimize
 
 __all__ = [
     "NumericalError",
@@ -110,7 +111,9 @@ class Factorization:
     ``kernel`` is the masked noise-free covariance K, ``inverse`` the inverse of
     Sigma = K + sigma_n^2 I (unit diagonal on padding), ``log_det`` log|Sigma| per expert,
     ``scaled`` the per-dimension scaled squared differences, ``alpha`` = Sigma^-1 z,
-    ``jitter`` what was added to the diagonal to make Sigma positive definite (0 normally).
+    ``jitter`` (per problem) what was added to the diagonal to make Sigma positive definite
+    (0 normally), ``failed`` (per problem) True where even the largest jitter did not (its
+    inverse, log-determinant and alpha are NaN).
     """
 
     kernel: np.ndarray
@@ -118,7 +121,13 @@ class Factorization:
     log_det: np.ndarray
     scaled: np.ndarray
     alpha: np.ndarray
-    jitter: float
+    jitter: np.ndarray
+    failed: np.ndarray
+
+    def check(self) -> None:
+        """Raise :class:`NumericalError` if any problem failed."""
+        if np.any(self.failed):
+            raise NumericalError("covariance matrix is not positive definite even with jitter")
 
 
 def _cholesky_inverse(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,35 +164,56 @@ def _as_data(X, z, mask) -> TrainingData:
 def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
     """Build K and invert Sigma = K + sigma_n^2 I for every expert, with escalating jitter.
 
-    If Sigma is not numerically positive definite, jitter of 1e-10, 1e-8, ..., 1e-2 times
-    the mean diagonal is added until it is; :class:`NumericalError` if even that fails.
+    Each problem of the batch (leading shape of ``log_params`` without its last axis) is
+    treated on its own: if one of its matrices is not numerically positive definite, jitter
+    of 1e-10, 1e-8, ..., 1e-2 times the mean diagonal of that problem's matrices is added to
+    all of them until they are. A problem that fails even so gets NaN in its inverse,
+    log-determinant and ``alpha`` and is flagged in ``Factorization.failed``; the other
+    problems are unaffected.
     """
-    params = np.exp(np.asarray(log_params, dtype=float))[..., None, None, None, :]
+    log_params = np.asarray(log_params, dtype=float)
+    params = np.exp(log_params)[..., None, None, None, :]
     scaled = data.squared_differences / (params[..., 1:-1] * params[..., 1:-1])
     kernel = params[..., 0] * data.pair_weight * np.exp(-0.5 * scaled.sum(axis=-1))
     noise_diagonal = params[..., -1] * data.weight[..., None] * data.identity
     sigma = kernel + noise_diagonal + data.padding_diagonal
-    n = kernel.shape[-1]
-    jitter = 0.0
+    problems = log_params.shape[:-1]
     try:
         inverse, log_det = _cholesky_inverse(sigma)
+        jitter, failed = np.zeros(problems), np.zeros(problems, dtype=bool)
     except np.linalg.LinAlgError:
-        scale = float(np.mean(np.diagonal(sigma, axis1=-2, axis2=-1)))
+        inverse, log_det, jitter, failed = _jittered_inverse(sigma, data.weight, problems)
+    alpha = np.einsum("...ij,...j->...i", inverse, data.z)
+    return Factorization(kernel, inverse, log_det, scaled, alpha, jitter, failed)
+
+
+def _jittered_inverse(sigma: np.ndarray, weight: np.ndarray, problems: tuple[int, ...]):
+    """:func:`factorize`'s rescue, problem by problem (a rare path, so a Python loop)."""
+    n = sigma.shape[-1]
+    sigma = np.broadcast_to(sigma, problems + sigma.shape[len(problems) :])
+    weight = np.broadcast_to(weight, sigma.shape[:-1])
+    inverse, log_det = np.full(sigma.shape, np.nan), np.full(sigma.shape[:-2], np.nan)
+    jitter, failed = np.zeros(problems), np.zeros(problems, dtype=bool)
+    for index in np.ndindex(*problems):
+        try:
+            inverse[index], log_det[index] = _cholesky_inverse(sigma[index])
+            continue
+        except np.linalg.LinAlgError:
+            pass
+        scale = float(np.mean(np.diagonal(sigma[index], axis1=-2, axis2=-1)))
         for exponent in range(-10, 0, 2):
-            jitter = scale * 10.0**exponent
+            jitter[index] = scale * 10.0**exponent
             try:
-                inverse, log_det = _cholesky_inverse(
-                    sigma + (jitter * data.weight)[..., None] * np.eye(n)
+                inverse[index], log_det[index] = _cholesky_inverse(
+                    sigma[index] + (jitter[index] * weight[index])[..., None] * np.eye(n)
                 )
                 break
             except np.linalg.LinAlgError:
                 continue
         else:
-            raise NumericalError(
-                "covariance matrix is not positive definite even with jitter"
-            ) from None
-    alpha = np.einsum("...ij,...j->...i", inverse, data.z)
-    return Factorization(kernel, inverse, log_det, scaled, alpha, jitter)
+            failed[index] = True
+            jitter[index] = np.nan
+    return inverse, log_det, jitter, failed
 
 
 def log_marginal_likelihood(
@@ -255,15 +285,16 @@ def default_bounds(d: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FitResult:
-    """Outcome of :func:`fit_hyperparameters`: the hyperparameters to use and the log
-    likelihood there; ``converged`` when L-BFGS-B met its tolerance (an improvement cut by
-    the iteration limit is used all the same), ``kept_start`` when the optimisation failed
-    and the start is returned."""
+    """Outcome of :func:`fit_hyperparameters`, per problem (the leading shape ``S`` of the
+    start): ``log_params`` (S, p) to use and ``log_likelihood`` (S,) there; ``converged``
+    (S,) where the projected gradient met the tolerance (a step cut short by the iteration
+    limit is used all the same), ``kept_start`` (S,) where the likelihood was not finite at
+    the start, which is then returned; ``n_evaluations`` likelihood rounds."""
 
     log_params: np.ndarray
     log_likelihood: np.ndarray
-    converged: bool
-    kept_start: bool
+    converged: np.ndarray
+    kept_start: np.ndarray
     n_evaluations: int
     message: str
 
@@ -277,15 +308,15 @@ def fit_hyperparameters(
     max_iterations: int = 50,
     gradient_tolerance: float = 1e-5,
 ) -> FitResult:
-    """Maximum-likelihood hyperparameters with L-BFGS-B in log space, warm-started at
-    ``log_params`` (*B, p); the batch's independent problems are optimised jointly (their
-    likelihoods add).
+    """Maximum-likelihood hyperparameters in log space, warm-started at ``log_params``
+    (*B, p): every problem of the batch is fitted on its own, all of them with one
+    likelihood evaluation per round (:func:`agents.optimize.minimize_in_box`, a projected
+    BFGS method), so a problem's result does not depend on the rest of the batch.
 
-    When the projected gradient at the start is already below ``gradient_tolerance`` (the
-    usual case for a warm start on a window that changed little), the start is returned
-    without calling the optimiser. The result never contains NaN: if the optimisation
-    fails, raises inside, or ends below the start's likelihood, the start is kept
-    (``kept_start``).
+    A problem whose projected gradient at the start is already below
+    ``gradient_tolerance`` (the usual case for a warm start on a window that changed
+    little) keeps its start. The result never contains NaN: where the likelihood is not
+    finite at the start, or the evaluation raises, the start is kept (``kept_start``).
     """
     start = np.asarray(log_params, dtype=float)
     d = start.shape[-1] - 2
@@ -293,50 +324,35 @@ def fit_hyperparameters(
     start = np.clip(start, bounds[:, 0], bounds[:, 1])
     shape = start.shape
     data = _as_data(X, z, mask)
-    memo: dict[bytes, tuple[float, np.ndarray, np.ndarray]] = {}
 
-    def evaluate(flat: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        key = flat.tobytes()
-        if key not in memo:
-            value, gradient = log_marginal_likelihood(flat.reshape(shape), data)
-            total = -float(np.sum(value))
-            if not np.isfinite(total) or not np.all(np.isfinite(gradient)):
-                raise NumericalError("non-finite likelihood")
-            memo[key] = (total, -gradient.ravel(), value)
-        return memo[key]
+    def negative_log_likelihood(flat: np.ndarray):
+        value, gradient = log_marginal_likelihood(flat.reshape(shape), data)
+        return -value, -gradient
 
-    def objective(flat: np.ndarray) -> tuple[float, np.ndarray]:
-        total, gradient, _ = evaluate(flat)
-        return total, gradient
-
-    flat_bounds = np.tile(bounds, (int(np.prod(shape[:-1])), 1))
     try:
-        start_total, start_gradient, start_value = evaluate(start.ravel())
-        blocked = ((start.ravel() <= flat_bounds[:, 0]) & (start_gradient > 0)) | (
-            (start.ravel() >= flat_bounds[:, 1]) & (start_gradient < 0)
+        result = optimize.minimize_in_box(
+            negative_log_likelihood, start, bounds, max_iterations, gradient_tolerance
         )
-        if np.max(np.abs(np.where(blocked, 0.0, start_gradient))) <= gradient_tolerance:
-            return FitResult(start, start_value, True, False, len(memo), "converged at the start")
-        result = optimize.minimize(
-            objective,
-            start.ravel(),
-            jac=True,
-            method="L-BFGS-B",
-            bounds=flat_bounds,
-            options={"maxiter": max_iterations, "gtol": gradient_tolerance},
-        )
-        fitted = result.x.reshape(shape)
-        if not np.all(np.isfinite(fitted)) or result.fun > start_total:
-            return FitResult(start, start_value, False, True, len(memo), str(result.message))
-        _, _, value = evaluate(result.x)
     except (NumericalError, np.linalg.LinAlgError, FloatingPointError) as error:
         value, _ = _safe_likelihood(start, data)
-        return FitResult(start, value, False, True, len(memo), str(error))
-    return FitResult(fitted, value, bool(result.success), False, len(memo), str(result.message))
+        none = np.zeros(shape[:-1], dtype=bool)
+        return FitResult(start, value, none, ~none, 0, str(error))
+    converged = result.converged
+    if result.n_evaluations == 1 and np.all(converged):
+        message = "converged at the start"
+    else:
+        codes, counts = np.unique(result.status, return_counts=True)
+        message = "; ".join(
+            f"{count} {optimize.STATUS_MESSAGES[code]}"
+            for code, count in zip(codes.tolist(), counts.tolist())
+        )
+    return FitResult(
+        result.x, -result.value, converged, result.failed, result.n_evaluations, message
+    )
 
 
 def _safe_likelihood(log_params, data):
     try:
         return log_marginal_likelihood(log_params, data, with_gradient=False)
-    except NumericalError:
+    except (NumericalError, np.linalg.LinAlgError, FloatingPointError):
         return np.full(np.shape(log_params)[:-1], -np.inf), None

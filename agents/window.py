@@ -16,6 +16,7 @@ __all__ = [
     "StepRecord",
     "SlidingWindow",
     "ExpertData",
+    "padded_size",
     "pad_by_group",
     "window_prior_mean",
     "PRIOR_MEANS",
@@ -56,14 +57,32 @@ def pad_by_group(groups: np.ndarray, *values: np.ndarray):
     return sorted_groups[starts], mask, padded
 
 
+def padded_size(size: int) -> int:
+    """The smallest of 1, 2, 3, 4, 6, 8, 12, 16, 24, ... (powers of two and 1.5 times them)
+    that is at least ``size``.
+
+    Expert arrays are padded to these sizes, alone or stacked with other episodes', so an
+    episode's arrays have the same shape whatever it is batched with, and the GP core's
+    results, which are exact under batching but change in the last bits with the padded
+    shape, are identical in a single run and in a lockstep batch (:func:`agents.dgpt.update_batch`).
+    At most 1.5 times the size.
+    """
+    if size <= 2:
+        return max(int(size), 1)
+    power = 1 << (int(size) - 1).bit_length()
+    return 3 * power // 4 if 3 * power // 4 >= size else power
+
+
 @dataclass(frozen=True)
 class ExpertData:
-    """Training data of the experts for both axes.
+    """Training data of the experts for both axes, of one episode or stacked over episodes
+    (a leading axis E on every field, :meth:`stack`).
 
-    ``sensors`` (M,) the expert sensors (a single -1 for one pooled expert); ``X`` (2, M, n,
-    d) inputs, ``z`` (2, M, n) outputs minus the prior mean, ``mask`` (M, n). The prior mean
-    of each axis is ``intercept + slope * tau`` at the time ``tau`` relative to the window's
-    end (:meth:`prior_mean`).
+    ``sensors`` (M,) the expert sensors (a single -1 for one pooled expert, -2 on padding);
+    ``X`` (2, M, n, d) inputs, ``z`` (2, M, n) outputs minus the prior mean, ``mask`` (M, n)
+    True for real points. The prior mean of each axis is ``intercept + slope * tau`` (each
+    (2,)) at the time ``tau`` relative to the window's end (:meth:`prior_mean`), with the
+    least-squares coefficient matrix ``trend_covariance`` (2, 2).
     """
 
     sensors: np.ndarray
@@ -78,22 +97,60 @@ class ExpertData:
     def n_points(self) -> int:
         return int(self.mask.sum())
 
+    @property
+    def experts(self) -> np.ndarray:
+        """(..., M) True for real experts, False for padding."""
+        return self.mask.any(axis=-1)
+
     @functools.cached_property
     def training(self) -> TrainingData:
         """The GP core's prepared form of ``X``, ``z`` and ``mask``."""
-        return TrainingData.build(self.X, self.z, self.mask)
+        return TrainingData.build(self.X, self.z, self.mask[..., None, :, :])
 
     def prior_mean(self, relative_time: float) -> np.ndarray:
-        """(2,) prior mean of the coordinates at ``relative_time`` (s after the window's end)."""
+        """(..., 2) prior mean of the coordinates at ``relative_time`` (s after the window's
+        end)."""
         return self.intercept + self.slope * relative_time
 
     def prior_mean_variance(self, relative_time: float, residual_var: np.ndarray) -> np.ndarray:
-        """(2,) variance of the estimated prior mean at ``relative_time``: the least-squares
-        coefficient covariance ``residual_var (H^T H)^-1`` mapped through ``[1, tau]``
-        (R&W Sec. 2.7: the uncertainty of explicit basis functions adds to the predictive
-        variance, and grows quadratically away from the data)."""
-        basis = np.array([1.0, relative_time])
-        return residual_var * float(basis @ self.trend_covariance @ basis)
+        """(..., 2) variance of the estimated prior mean at ``relative_time``: the
+        least-squares coefficient covariance ``residual_var (H^T H)^-1`` mapped through
+        ``[1, tau]`` (R&W Sec. 2.7: the uncertainty of explicit basis functions adds to the
+        predictive variance, and grows quadratically away from the data)."""
+        c = self.trend_covariance
+        tau = relative_time
+        quadratic_form = (
+            c[..., 0, 0] + tau * (c[..., 0, 1] + c[..., 1, 0]) + tau * tau * c[..., 1, 1]
+        )
+        return residual_var * quadratic_form[..., None]
+
+    def padded(self, n_experts: int, n_points: int) -> ExpertData:
+        """The same data padded to ``n_experts`` experts of ``n_points`` points (one episode)."""
+        experts, points = self.mask.shape
+        if (experts, points) == (n_experts, n_points):
+            return self
+        if experts > n_experts or points > n_points:
+            raise ValueError(
+                f"cannot pad {experts} experts x {points} points to {n_experts} x {n_points}"
+            )
+        grow = ((0, n_experts - experts), (0, n_points - points))
+        return ExpertData(
+            sensors=np.pad(self.sensors, grow[0], constant_values=-2),
+            X=np.pad(self.X, ((0, 0), *grow, (0, 0))),
+            z=np.pad(self.z, ((0, 0), *grow)),
+            mask=np.pad(self.mask, grow),
+            intercept=self.intercept,
+            slope=self.slope,
+            trend_covariance=self.trend_covariance,
+        )
+
+    @classmethod
+    def stack(cls, items: list[ExpertData]) -> ExpertData:
+        """Episodes' data of equal shapes stacked on a new leading axis."""
+        return cls(*(np.stack([getattr(item, name) for item in items]) for name in _FIELDS))
+
+
+_FIELDS = ("sensors", "X", "z", "mask", "intercept", "slope", "trend_covariance")
 
 
 class SlidingWindow:

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 import numpy as np
@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 
 from dgpt_gym import metrics
 
-__all__ = ["EpisodeResult", "run_episode", "run_monte_carlo", "summarize_runs"]
+__all__ = ["EpisodeResult", "run_episode", "run_episodes", "run_monte_carlo", "summarize_runs"]
 
 
 @dataclass(frozen=True)
@@ -67,30 +67,83 @@ def run_episode(env: gym.Env, tracker, seed: int | None) -> EpisodeResult:
     The tracker is reset with the ``ProblemSpec`` from the env's reset info and the same
     seed, so the result is a function of ``seed``.
     """
-    observation, info = env.reset(seed=seed)
-    tracker.reset(info["problem_spec"], seed=seed)
-    truth, mean, var, ucb, step_time, n_measurements, n_detecting = ([] for _ in range(7))
-    truncated = terminated = False
-    while not (truncated or terminated):
+    return run_episodes([env], [tracker], [seed])[0]
+
+
+def run_episodes(
+    envs: Sequence[gym.Env], trackers: Sequence, seeds: Sequence[int | None]
+) -> list[EpisodeResult]:
+    """Run episode i of ``envs[i]`` with ``trackers[i]`` and ``seeds[i]``, all in lockstep.
+
+    Each step, the trackers of the episodes still running take their observations in one
+    call of ``update_batch`` when their class has one (:meth:`agents.base.TrackerBase.update_batch`;
+    DGPT batches its learning and prediction over the episodes), else one ``update`` each.
+    The results equal those of :func:`run_episode` on each episode alone; ``step_time`` is
+    the batch's time per step divided by the number of episodes it stepped.
+    """
+    if not len(envs) == len(trackers) == len(seeds):
+        raise ValueError(
+            "envs, trackers and seeds must have the same length; got "
+            f"{len(envs)}, {len(trackers)} and {len(seeds)}"
+        )
+    observations = []
+    for env, tracker, seed in zip(envs, trackers, seeds):
+        observation, info = env.reset(seed=seed)
+        tracker.reset(info["problem_spec"], seed=seed)
+        observations.append(observation)
+    update_batch = getattr(type(trackers[0]), "update_batch", None) if trackers else None
+    if update_batch is None or any(type(tracker) is not type(trackers[0]) for tracker in trackers):
+        update_batch = _update_each
+    records = [_EpisodeRecord() for _ in envs]
+    running = list(range(len(envs)))
+    while running:
         started = time.perf_counter()
-        estimate = tracker.update(observation)
-        step_time.append(time.perf_counter() - started)
-        mean.append(estimate.mean)
-        var.append(estimate.var)
-        ucb.append(np.full(2, np.nan) if estimate.ucb is None else estimate.ucb)
-        n_measurements.append(int(np.sum(observation["mask"])))
-        observation, _, terminated, truncated, info = env.step(estimate.mean)
-        truth.append(info["position"])
-        n_detecting.append(len(info["active_sensors"]))
-    return EpisodeResult(
-        truth=np.asarray(truth),
-        mean=np.asarray(mean, dtype=float),
-        var=np.asarray(var, dtype=float),
-        ucb=np.asarray(ucb, dtype=float),
-        step_time=np.asarray(step_time),
-        n_measurements=np.asarray(n_measurements),
-        n_detecting=np.asarray(n_detecting),
-    )
+        estimates = update_batch([trackers[i] for i in running], [observations[i] for i in running])
+        elapsed = (time.perf_counter() - started) / len(running)
+        still_running = []
+        for index, estimate in zip(running, estimates):
+            record, observation = records[index], observations[index]
+            record.step_time.append(elapsed)
+            record.mean.append(estimate.mean)
+            record.var.append(estimate.var)
+            record.ucb.append(np.full(2, np.nan) if estimate.ucb is None else estimate.ucb)
+            record.n_measurements.append(int(np.sum(observation["mask"])))
+            observation, _, terminated, truncated, info = envs[index].step(estimate.mean)
+            observations[index] = observation
+            record.truth.append(info["position"])
+            record.n_detecting.append(len(info["active_sensors"]))
+            if not (terminated or truncated):
+                still_running.append(index)
+        running = still_running
+    return [record.result() for record in records]
+
+
+def _update_each(trackers, observations):
+    return [tracker.update(observation) for tracker, observation in zip(trackers, observations)]
+
+
+@dataclass
+class _EpisodeRecord:
+    """The per-step lists of one episode while it runs."""
+
+    truth: list = field(default_factory=list)
+    mean: list = field(default_factory=list)
+    var: list = field(default_factory=list)
+    ucb: list = field(default_factory=list)
+    step_time: list = field(default_factory=list)
+    n_measurements: list = field(default_factory=list)
+    n_detecting: list = field(default_factory=list)
+
+    def result(self) -> EpisodeResult:
+        return EpisodeResult(
+            truth=np.asarray(self.truth),
+            mean=np.asarray(self.mean, dtype=float),
+            var=np.asarray(self.var, dtype=float),
+            ucb=np.asarray(self.ucb, dtype=float),
+            step_time=np.asarray(self.step_time),
+            n_measurements=np.asarray(self.n_measurements),
+            n_detecting=np.asarray(self.n_detecting),
+        )
 
 
 def run_monte_carlo(

@@ -21,6 +21,7 @@ from dgpt_gym.evaluation import format_nrmse_table
 from dgpt_gym.outputs import write_outputs
 from dgpt_gym.registry import tracker_spec
 from dgpt_gym.sweep import (
+    DEFAULT_BATCH_SIZE,
     PAPER_GP_TRACKERS,
     PAPER_SWEEP,
     QUICK_SWEEP,
@@ -112,6 +113,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="local worker processes (default: all cores; 1 runs in this process)",
     )
     parser.add_argument(
+        "--batch-size",
+        type=int,
+        default=DEFAULT_BATCH_SIZE,
+        help="runs of one tracker on one cell stepped in lockstep per task (default: "
+        f"{DEFAULT_BATCH_SIZE}); changes the speed, never the numbers",
+    )
+    parser.add_argument(
         "--scheduler",
         metavar="ADDRESS",
         default=None,
@@ -189,8 +197,16 @@ def main(argv: list[str] | None = None) -> int:
     if not args.report_only:
         try:
             sweep = run_sweep(
-                grids, out, args.workers, args.scheduler, progress=not args.no_progress
+                grids,
+                out,
+                args.workers,
+                args.scheduler,
+                progress=not args.no_progress,
+                batch_size=args.batch_size,
             )
+        except ValueError as error:  # a bad --workers or --batch-size
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         except ImportError as error:  # --scheduler without the cluster extra
             print(f"error: {error}", file=sys.stderr)
             return 2

@@ -1,0 +1,224 @@
+"""Box-constrained minimisation of many independent small problems at once.
+
+The online hyperparameter fit of a GP tracker (Sec. IV-D) is a handful of quasi-Newton
+iterations on 3-4 log hyperparameters per axis. Run one episode at a time, scipy's L-BFGS-B
+spends more on its per-call overhead than on the likelihood; run many Monte Carlo episodes
+in lockstep (:func:`agents.dgpt.update_batch`), the problems must be solved together, with
+one likelihood evaluation for all of them per round, and yet each exactly as if it were
+alone. scipy has no batched bound-constrained optimiser, hence this module.
+
+:func:`minimize_in_box` is a projected BFGS method (Bertsekas' projected quasi-Newton with
+an Armijo line search along the projection arc, Nocedal & Wright Alg. 6.1 for the update).
+Every problem has its own iterate, inverse-Hessian approximation, step length and stopping
+state, and every operation is elementwise over problems, so a problem's iterates do not
+depend on which other problems share the batch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["BoxResult", "minimize_in_box", "projected_gradient", "STATUS_MESSAGES"]
+
+RUNNING, CONVERGED, ITERATION_LIMIT, LINE_SEARCH_FAILED, FAILED_AT_START = range(5)
+STATUS_MESSAGES = {
+    CONVERGED: "projected gradient below tolerance",
+    ITERATION_LIMIT: "iteration limit reached",
+    LINE_SEARCH_FAILED: "line search found no decrease",
+    FAILED_AT_START: "objective not finite at the start",
+}
+_ARMIJO = 1e-4
+_MAX_BACKTRACKS = 10
+
+
+@dataclass(frozen=True)
+class BoxResult:
+    """Outcome per problem (leading shape ``S`` of the start): ``x`` (S, p), ``value`` (S,)
+    and ``gradient`` (S, p) there, ``status`` (S,) a key of :data:`STATUS_MESSAGES`,
+    ``iterations`` (S,) accepted steps; ``n_evaluations`` rounds of the objective (each
+    evaluates every problem)."""
+
+    x: np.ndarray
+    value: np.ndarray
+    gradient: np.ndarray
+    status: np.ndarray
+    iterations: np.ndarray
+    n_evaluations: int
+
+    @property
+    def converged(self) -> np.ndarray:
+        return self.status == CONVERGED
+
+    @property
+    def failed(self) -> np.ndarray:
+        return self.status == FAILED_AT_START
+
+
+def projected_gradient(x: np.ndarray, gradient: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """The gradient with the components that point out of the box at an active bound set to
+    zero: a point is optimal for the box-constrained problem where this vanishes."""
+    blocked = ((x <= bounds[:, 0]) & (gradient > 0)) | ((x >= bounds[:, 1]) & (gradient < 0))
+    return np.where(blocked, 0.0, gradient)
+
+
+def _matvec(matrices: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """(P, p, p) x (P, p) -> (P, p), summed elementwise (no BLAS: identical per problem)."""
+    return (matrices * vectors[:, None, :]).sum(axis=-1)
+
+
+def _bfgs_update(inverse_hessian, s, y, fresh):
+    """BFGS update of the inverse Hessian H with step s and gradient change y (N&W eq.
+    (6.17)); where ``fresh`` (no curvature yet) H is first scaled to s.y / y.y I (eq.
+    (6.20)). Problems with s.y <= 0 keep H."""
+    sy = np.sum(s * y, axis=-1)
+    yy = np.sum(y * y, axis=-1)
+    curved = sy > 1e-12 * np.sqrt(np.sum(s * s, axis=-1) * yy)
+    scale = np.where(curved, sy / np.where(yy > 0, yy, 1.0), 1.0)
+    eye = np.eye(s.shape[-1])
+    H = np.where(fresh[:, None, None], scale[:, None, None] * eye, inverse_hessian)
+    rho = np.where(curved, 1.0 / np.where(curved, sy, 1.0), 0.0)
+    Hy = _matvec(H, y)
+    yHy = np.sum(y * Hy, axis=-1)
+    outer_s = s[:, :, None] * s[:, None, :]
+    cross = Hy[:, :, None] * s[:, None, :]
+    updated = (
+        H
+        - rho[:, None, None] * (cross + np.swapaxes(cross, -1, -2))
+        + (rho + rho * rho * yHy)[:, None, None] * outer_s
+    )
+    return np.where(curved[:, None, None], updated, inverse_hessian), fresh & ~curved
+
+
+def minimize_in_box(
+    fun: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    x0: np.ndarray,
+    bounds: np.ndarray,
+    max_iterations: int = 50,
+    gradient_tolerance: float = 1e-5,
+    max_step: float = 1.0,
+) -> BoxResult:
+    """Minimise independent problems ``fun`` over the box ``bounds``.
+
+    Args:
+        fun: ``x`` (P, p) -> (value (P,), gradient (P, p)); called with every problem in
+            each round (finished problems at their final point). Non-finite values are
+            allowed: at the start they fail the problem, at a trial point they shorten the
+            step.
+        x0: (*S, p) starts, clipped into the box.
+        bounds: (p, 2) lower and upper bounds, shared by all problems.
+        max_iterations: accepted steps per problem.
+        gradient_tolerance: stop a problem when the largest component of its projected
+            gradient (:func:`projected_gradient`) is at most this.
+        max_step: the first step of a problem, which has no curvature information yet, is
+            scaled to at most this in every coordinate.
+
+    Each iteration takes the quasi-Newton direction on the coordinates not held at a bound,
+    moves along the projection of that ray onto the box and backtracks (safeguarded
+    quadratic interpolation) until the Armijo condition holds; a problem stops when its
+    projected gradient is small, after ``max_iterations`` accepted steps, or when ten
+    backtracks find no decrease. Values never increase.
+    """
+    x0 = np.asarray(x0, dtype=float)
+    bounds = np.asarray(bounds, dtype=float)
+    shape, p = x0.shape[:-1], x0.shape[-1]
+    if bounds.shape != (p, 2):
+        raise ValueError(f"bounds must have shape ({p}, 2); got {bounds.shape}")
+    lower, upper = bounds[:, 0], bounds[:, 1]
+    x = np.clip(x0.reshape(-1, p), lower, upper)
+    n_problems = x.shape[0]
+
+    def evaluate(points):
+        value, gradient = fun(points)
+        value = np.asarray(value, dtype=float).reshape(n_problems)
+        gradient = np.asarray(gradient, dtype=float).reshape(n_problems, p)
+        finite = np.isfinite(value) & np.all(np.isfinite(gradient), axis=-1)
+        return value, gradient, finite
+
+    value, gradient, finite = evaluate(x)
+    n_evaluations = 1
+    status = np.where(finite, RUNNING, FAILED_AT_START)
+    gradient = np.where(finite[:, None], gradient, 0.0)
+    status[(status == RUNNING) & _small(x, gradient, bounds, gradient_tolerance)] = CONVERGED
+    iterations = np.zeros(n_problems, dtype=np.int64)
+    inverse_hessian = np.broadcast_to(np.eye(p), (n_problems, p, p)).copy()
+    fresh = np.ones(n_problems, dtype=bool)
+    direction = np.zeros_like(x)
+    step_length = np.ones(n_problems)
+    backtracks = np.zeros(n_problems, dtype=np.int64)
+    new_direction = status == RUNNING
+    max_rounds = max_iterations * (_MAX_BACKTRACKS + 1)
+    while np.any(status == RUNNING) and n_evaluations <= max_rounds:
+        if np.any(new_direction):
+            candidate = _direction(x, gradient, inverse_hessian, fresh, bounds, max_step)
+            direction = np.where(new_direction[:, None], candidate, direction)
+            step_length = np.where(new_direction, 1.0, step_length)
+            backtracks = np.where(new_direction, 0, backtracks)
+        running = status == RUNNING
+        trial = np.where(
+            running[:, None], np.clip(x + step_length[:, None] * direction, lower, upper), x
+        )
+        trial_value, trial_gradient, trial_finite = evaluate(trial)
+        n_evaluations += 1
+        step = trial - x
+        slope = np.sum(gradient * step, axis=-1)
+        accepted = running & trial_finite & (slope < 0) & (trial_value <= value + _ARMIJO * slope)
+        if np.any(accepted):
+            y = np.where(accepted[:, None], trial_gradient - gradient, 0.0)
+            updated, still_fresh = _bfgs_update(inverse_hessian, step, y, fresh)
+            inverse_hessian = np.where(accepted[:, None, None], updated, inverse_hessian)
+            fresh = np.where(accepted, still_fresh, fresh)
+            x = np.where(accepted[:, None], trial, x)
+            value = np.where(accepted, trial_value, value)
+            gradient = np.where(accepted[:, None], trial_gradient, gradient)
+            iterations += accepted
+            small = _small(x, gradient, bounds, gradient_tolerance)
+            status[accepted & small] = CONVERGED
+            status[accepted & ~small & (iterations >= max_iterations)] = ITERATION_LIMIT
+        rejected = running & ~accepted
+        shrunk = _backtrack(step_length, slope, value, trial_value, trial_finite)
+        step_length = np.where(rejected, shrunk, step_length)
+        backtracks += rejected
+        status[rejected & ((backtracks > _MAX_BACKTRACKS) | (slope >= 0))] = LINE_SEARCH_FAILED
+        new_direction = accepted & (status == RUNNING)
+    status[status == RUNNING] = ITERATION_LIMIT
+    return BoxResult(
+        x=x.reshape(x0.shape),
+        value=value.reshape(shape),
+        gradient=gradient.reshape(x0.shape),
+        status=status.reshape(shape),
+        iterations=iterations.reshape(shape),
+        n_evaluations=n_evaluations,
+    )
+
+
+def _small(x, gradient, bounds, tolerance) -> np.ndarray:
+    return np.max(np.abs(projected_gradient(x, gradient, bounds)), axis=-1) <= tolerance
+
+
+def _direction(x, gradient, inverse_hessian, fresh, bounds, max_step):
+    """Quasi-Newton direction on the free coordinates (those not held at a bound by the
+    gradient): -H g restricted to them, or steepest descent where that is not a descent
+    direction; scaled to ``max_step`` per coordinate while there is no curvature yet."""
+    free_gradient = projected_gradient(x, gradient, bounds)
+    free = free_gradient != 0.0
+    restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
+    direction = -_matvec(restricted, free_gradient)
+    descent = np.sum(direction * free_gradient, axis=-1) < 0
+    direction = np.where(descent[:, None], direction, -free_gradient)
+    largest = np.max(np.abs(direction), axis=-1)
+    scale = np.where(fresh & (largest > max_step), max_step / np.maximum(largest, 1e-300), 1.0)
+    return direction * scale[:, None]
+
+
+def _backtrack(step_length, slope, value, trial_value, trial_finite):
+    """Next step length after a rejected trial: the minimiser of the quadratic through the
+    value and slope at 0 and the trial value, kept within [0.1, 0.5] of the last length
+    (0.25 of it where the trial was not finite)."""
+    curvature = trial_value - value - slope
+    with np.errstate(divide="ignore", invalid="ignore"):
+        quadratic = step_length * (-slope) / (2.0 * curvature)
+    quadratic = np.where(trial_finite & (curvature > 0), quadratic, 0.25 * step_length)
+    return np.clip(quadratic, 0.1 * step_length, 0.5 * step_length)
