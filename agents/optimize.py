@@ -117,9 +117,11 @@ def minimize_in_box(
 
     Each iteration takes the quasi-Newton direction on the coordinates not held at a bound,
     moves along the projection of that ray onto the box and backtracks (safeguarded
-    quadratic interpolation) until the Armijo condition holds; a problem stops when its
-    projected gradient is small, after ``max_iterations`` accepted steps, or when ten
-    backtracks find no decrease. Values never increase.
+    quadratic interpolation) until the Armijo condition holds; if ten backtracks find no
+    decrease, the iteration is retried along the projected steepest descent with the
+    curvature forgotten. A problem stops when its projected gradient is small, after
+    ``max_iterations`` accepted steps, or when steepest descent finds no decrease either.
+    Values never increase.
     """
     x0 = np.asarray(x0, dtype=float)
     bounds = np.asarray(bounds, dtype=float)
@@ -148,11 +150,14 @@ def minimize_in_box(
     direction = np.zeros_like(x)
     step_length = np.ones(n_problems)
     backtracks = np.zeros(n_problems, dtype=np.int64)
+    steepest = np.zeros(n_problems, dtype=bool)  # retrying an iteration along -g
     new_direction = status == RUNNING
-    max_rounds = max_iterations * (_MAX_BACKTRACKS + 1)
+    max_rounds = 2 * max_iterations * (_MAX_BACKTRACKS + 1)
     while np.any(status == RUNNING) and n_evaluations <= max_rounds:
         if np.any(new_direction):
-            candidate = _direction(x, gradient, inverse_hessian, fresh, bounds, max_step)
+            candidate = _direction(
+                x, gradient, inverse_hessian, fresh, steepest, bounds, max_step
+            )
             direction = np.where(new_direction[:, None], candidate, direction)
             step_length = np.where(new_direction, 1.0, step_length)
             backtracks = np.where(new_direction, 0, backtracks)
@@ -166,7 +171,9 @@ def minimize_in_box(
         slope = np.sum(gradient * step, axis=-1)
         accepted = running & trial_finite & (slope < 0) & (trial_value <= value + _ARMIJO * slope)
         if np.any(accepted):
-            y = np.where(accepted[:, None], trial_gradient - gradient, 0.0)
+            # the gradient change on the coordinates that moved: the curvature of the face
+            # the step ran along (coordinates held at a bound would add spurious terms)
+            y = np.where(accepted[:, None] & (step != 0), trial_gradient - gradient, 0.0)
             updated, still_fresh = _bfgs_update(inverse_hessian, step, y, fresh)
             inverse_hessian = np.where(accepted[:, None, None], updated, inverse_hessian)
             fresh = np.where(accepted, still_fresh, fresh)
@@ -177,12 +184,20 @@ def minimize_in_box(
             small = _small(x, gradient, bounds, gradient_tolerance)
             status[accepted & small] = CONVERGED
             status[accepted & ~small & (iterations >= max_iterations)] = ITERATION_LIMIT
+        steepest &= ~accepted
         rejected = running & ~accepted
         shrunk = _backtrack(step_length, slope, value, trial_value, trial_finite)
         step_length = np.where(rejected, shrunk, step_length)
         backtracks += rejected
-        status[rejected & ((backtracks > _MAX_BACKTRACKS) | (slope >= 0))] = LINE_SEARCH_FAILED
-        new_direction = accepted & (status == RUNNING)
+        stuck = rejected & ((backtracks > _MAX_BACKTRACKS) | (slope >= 0))
+        # a quasi-Newton direction that finds no decrease is retried once along -g
+        # with fresh curvature; a steepest-descent one that finds none ends the problem
+        status[stuck & steepest] = LINE_SEARCH_FAILED
+        retry = stuck & ~steepest
+        steepest |= retry
+        fresh |= retry
+        inverse_hessian = np.where(retry[:, None, None], np.eye(p), inverse_hessian)
+        new_direction = (accepted & (status == RUNNING)) | retry
     status[status == RUNNING] = ITERATION_LIMIT
     return BoxResult(
         x=x.reshape(x0.shape),
@@ -198,18 +213,30 @@ def _small(x, gradient, bounds, tolerance) -> np.ndarray:
     return np.max(np.abs(projected_gradient(x, gradient, bounds)), axis=-1) <= tolerance
 
 
-def _direction(x, gradient, inverse_hessian, fresh, bounds, max_step):
-    """Quasi-Newton direction on the free coordinates (those not held at a bound by the
-    gradient): -H g restricted to them, or steepest descent where that is not a descent
-    direction; scaled to ``max_step`` per coordinate while there is no curvature yet."""
+def _direction(x, gradient, inverse_hessian, fresh, steepest, bounds, max_step):
+    """Quasi-Newton direction -H g on the free coordinates: those not held at a bound,
+    neither by the gradient nor by the direction itself (a coordinate at a bound that the
+    direction would push out of the box is fixed and the direction recomputed, so that a
+    short step along it stays a descent direction: a principal submatrix of H is positive
+    definite). Steepest descent where ``steepest`` or where that fails; scaled to
+    ``max_step`` per coordinate while there is no curvature yet."""
+    lower, upper = bounds[:, 0], bounds[:, 1]
     free_gradient = projected_gradient(x, gradient, bounds)
     free = free_gradient != 0.0
-    restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
-    direction = -_matvec(restricted, free_gradient)
-    descent = np.sum(direction * free_gradient, axis=-1) < 0
-    direction = np.where(descent[:, None], direction, -free_gradient)
+    for _ in range(x.shape[-1]):
+        restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
+        direction = -_matvec(restricted, np.where(free, gradient, 0.0))
+        leaving = free & (((x <= lower) & (direction < 0)) | ((x >= upper) & (direction > 0)))
+        if not np.any(leaving):
+            break
+        free &= ~leaving
+    direction = np.where(free, direction, 0.0)
+    descent = np.sum(direction * gradient, axis=-1) < 0
+    fallback = steepest | ~descent
+    direction = np.where(fallback[:, None], -free_gradient, direction)
     largest = np.max(np.abs(direction), axis=-1)
-    scale = np.where(fresh & (largest > max_step), max_step / np.maximum(largest, 1e-300), 1.0)
+    first = fresh | fallback
+    scale = np.where(first & (largest > max_step), max_step / np.maximum(largest, 1e-300), 1.0)
     return direction * scale[:, None]
 
 
