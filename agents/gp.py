@@ -168,8 +168,8 @@ def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
     treated on its own: if one of its matrices is not numerically positive definite, jitter
     of 1e-10, 1e-8, ..., 1e-2 times the mean diagonal of that problem's matrices is added to
     all of them until they are. A problem that fails even so gets NaN in its inverse,
-    log-determinant and ``alpha`` and is flagged in ``Factorization.failed``; the other
-    problems are unaffected.
+    log-determinant and ``alpha`` and is flagged in ``Factorization.failed``, as is one
+    whose hyperparameters are not finite; the other problems are unaffected.
     """
     log_params = np.asarray(log_params, dtype=float)
     params = np.exp(log_params)[..., None, None, None, :]
@@ -183,6 +183,8 @@ def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
         jitter, failed = np.zeros(problems), np.zeros(problems, dtype=bool)
     except np.linalg.LinAlgError:
         inverse, log_det, jitter, failed = _jittered_inverse(sigma, data.weight, problems)
+    # non-finite hyperparameters give NaN matrices, which the Cholesky does not reject
+    failed = failed | ~np.isfinite(log_det.reshape(problems + (-1,))).all(axis=-1)
     alpha = np.einsum("...ij,...j->...i", inverse, data.z)
     return Factorization(kernel, inverse, log_det, scaled, alpha, jitter, failed)
 

@@ -155,9 +155,7 @@ def minimize_in_box(
     max_rounds = 2 * max_iterations * (_MAX_BACKTRACKS + 1)
     while np.any(status == RUNNING) and n_evaluations <= max_rounds:
         if np.any(new_direction):
-            candidate = _direction(
-                x, gradient, inverse_hessian, fresh, steepest, bounds, max_step
-            )
+            candidate = _direction(x, gradient, inverse_hessian, fresh, steepest, bounds, max_step)
             direction = np.where(new_direction[:, None], candidate, direction)
             step_length = np.where(new_direction, 1.0, step_length)
             backtracks = np.where(new_direction, 0, backtracks)

@@ -12,6 +12,9 @@
 - sklearn: full-GP log marginal likelihood + gradient versus scikit-learn's
   ``GaussianProcessRegressor.log_marginal_likelihood(theta, eval_gradient=True)`` on the same
   data and kernel, N = 1000, 2000, 4000. Goal: ratio <= 1.
+- lockstep: seconds per episode of the GP trackers run one episode at a time
+  (``run_episode``) and in a lockstep block (``run_episodes``, the sweep's way), on the same
+  seeds, checking that the numbers are identical; the ratio is the sweep's speed-up.
 - training-time: the paper's Sec. VII-A experiment (Fig. 2): f(x) = 5 x1^2 + sin(12 x2),
   sigma_z = 0.5; likelihood + gradient of the full GP and of DGP with M = 2, 5, 10, 20
   experts, N = 500 .. 10000; writes docs/training_time.csv and docs/figures/training_time.png.
@@ -31,12 +34,12 @@ import numpy as np
 
 import dgpt_gym
 from agents import gp
-from dgpt_gym.evaluation import run_episode
+from dgpt_gym.evaluation import run_episode, run_episodes
 from dgpt_gym.plots import plot_training_time
 from dgpt_gym.registry import make_tracker
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-SECTIONS = ["env", "dgpt-step", "cpf-hybrid", "sklearn", "training-time"]
+SECTIONS = ["env", "dgpt-step", "cpf-hybrid", "lockstep", "sklearn", "training-time"]
 
 
 def step_cost(env: gym.Env, action, n_steps: int, seed: int = 0) -> float:
@@ -112,6 +115,32 @@ def bench_cpf_and_hybrid(episodes: int) -> dict:
         hybrid = median_step_ms(variant, episodes, window=3)
         results[f"{variant} / DGPT-RBCM step (goal <= 1.10)"] = hybrid / dgpt
     results["DGPT-RBCM step, window 3 (ms)"] = dgpt
+    return results
+
+
+def bench_lockstep(episodes: int) -> dict:
+    """Seconds per episode alone and in one lockstep block of ``episodes`` (S3, sigma_z 2,
+    clutter rate 5, window 3: a cell of the paper's grid), on the same seeds."""
+    env_kwargs = {"scenario": "S3", "noise_std": 2.0, "clutter_rate": 5.0}
+    seeds = list(range(episodes))
+    results = {}
+    for tracker_id in ("dgpt-rbcm", "dgpt-gpoe-stgp", "gp"):
+        env = gym.make("DGPTrack-v0", **env_kwargs)
+        started = time.perf_counter()
+        alone = [run_episode(env, make_tracker(tracker_id, window=3), seed) for seed in seeds]
+        alone_time = (time.perf_counter() - started) / episodes
+        envs = [gym.make("DGPTrack-v0", **env_kwargs) for _ in seeds]
+        trackers = [make_tracker(tracker_id, window=3) for _ in seeds]
+        started = time.perf_counter()
+        together = run_episodes(envs, trackers, seeds)
+        block_time = (time.perf_counter() - started) / episodes
+        assert all(
+            np.array_equal(a.mean, b.mean) and np.array_equal(a.var, b.var)
+            for a, b in zip(alone, together)
+        ), "a lockstep block changed the numbers"
+        results[f"{tracker_id}: alone (s/episode) / block (s/episode) = speed-up"] = (
+            f"{alone_time:.3f} / {block_time:.3f} = {alone_time / block_time:.1f}"
+        )
     return results
 
 
@@ -223,6 +252,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n## CPF and hybrid filter steps ({args.episodes} episodes of S3, clutter rate 5)")
         for key, value in bench_cpf_and_hybrid(args.episodes).items():
             print(f"{key}: {value:.3f}")
+    if "lockstep" in args.only:
+        blocks = args.episodes * 5
+        print(
+            f"\n## lockstep blocks of {blocks} episodes (S3, sigma_z 2, clutter rate 5, window 3)"
+        )
+        for key, value in bench_lockstep(blocks).items():
+            print(f"{key}: {value}")
     if "sklearn" in args.only:
         print("\n## full-GP log marginal likelihood + gradient versus scikit-learn")
         for key, value in bench_sklearn([1000, 2000, 4000], repeats=3).items():

@@ -132,3 +132,46 @@ def test_ucb_is_wider_than_the_one_sigma_interval():
 def test_invalid_options(kwargs, name):
     with pytest.raises(ValueError, match=name):
         DGPT(**kwargs)
+
+
+def test_lockstep_batch_equals_each_episode_alone():
+    """Different trackers (distributed and pooled, TGP and STGP, another window, the hard
+    gate, the anytime UCB) and seeds stepped together by ``run_episodes`` give bit for bit
+    the estimates, variances and UCBs of each episode run alone."""
+    from dgpt_gym.evaluation import run_episodes
+
+    settings = [
+        ("dgpt-rbcm", {}, 0),
+        ("dgpt-gpoe-stgp", {}, 1),
+        ("gp", {"window": 5}, 2),
+        ("dgpt-rbcm", {"gate_threshold": 4.0, "anytime_ucb": True}, 3),
+        ("dgpt-rbcm", {}, 4),
+    ]
+    alone = [
+        episode(make_tracker(t, **kw), "S2", seed, clutter_rate=5.0) for t, kw, seed in settings
+    ]
+    envs = [gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0) for _ in settings]
+    together = run_episodes(
+        envs, [make_tracker(t, **kw) for t, kw, _ in settings], [seed for *_, seed in settings]
+    )
+    for single, batched in zip(alone, together):
+        np.testing.assert_array_equal(single.mean, batched.mean)
+        np.testing.assert_array_equal(single.var, batched.var)
+        np.testing.assert_array_equal(single.ucb, batched.ucb)
+
+
+def test_update_batch_rejects_mismatched_lengths():
+    from agents.dgpt import update_batch
+
+    with pytest.raises(ValueError, match="same length"):
+        update_batch([DGPT()], [])
+
+
+@pytest.mark.parametrize(
+    "size, padded",
+    [(1, 1), (2, 2), (3, 3), (4, 4), (5, 6), (6, 6), (7, 8), (9, 12), (13, 16), (17, 24), (25, 32)],
+)
+def test_padded_sizes(size, padded):
+    from agents.window import padded_size
+
+    assert padded_size(size) == padded

@@ -223,3 +223,30 @@ def test_full_gp_equals_scikit_learn():
     value, gradient = gp.log_marginal_likelihood(theta[None], x[None, None], z[None, None])
     assert value[0] == pytest.approx(expected_value, rel=1e-10)
     np.testing.assert_allclose(gradient[0], expected_gradient, rtol=1e-8)
+
+
+def test_an_indefinite_problem_does_not_disturb_the_rest_of_the_batch():
+    """Problem 0 has duplicate inputs and no noise (rescued by its own jitter), problem 1
+    is well conditioned: its factorization equals the one computed alone, without jitter."""
+    rng = np.random.default_rng(11)
+    X = np.concatenate([np.zeros((1, 1, 4, 1)), rng.normal(size=(1, 1, 4, 1))])
+    z = rng.normal(size=(2, 1, 4))
+    log_params = np.array([[0.0, 0.0, -800.0], [0.0, 0.0, -1.0]])
+    together = gp.factorize(log_params, gp.TrainingData.build(X, z))
+    alone = gp.factorize(log_params[1:], gp.TrainingData.build(X[1:], z[1:]))
+    assert together.jitter[0] > 0 and together.jitter[1] == 0 and not together.failed.any()
+    np.testing.assert_array_equal(together.inverse[1], alone.inverse[0])
+    np.testing.assert_array_equal(together.log_det[1], alone.log_det[0])
+
+
+def test_a_problem_beyond_rescue_is_flagged_not_raised():
+    X = np.zeros((2, 1, 3, 1))
+    z = np.ones((2, 1, 3))
+    log_params = np.array([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0]])  # NaN signal: no jitter helps
+    fact = gp.factorize(log_params, gp.TrainingData.build(X, z))
+    assert fact.failed.tolist() == [False, True] and np.all(np.isfinite(fact.alpha[0]))
+    with pytest.raises(gp.NumericalError):
+        fact.check()
+    result = gp.fit_hyperparameters(log_params, X, z)
+    assert result.kept_start.tolist() == [False, True]
+    assert np.all(np.isfinite(result.log_params[0]))
