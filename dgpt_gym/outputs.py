@@ -157,14 +157,13 @@ def results_markdown(
     summaries: list[dict], failures: list[dict], total_units: int, command: str, links: list[str]
 ) -> str:
     """``results.md``: what the sweep measured, in one page."""
-    from dgpt_gym import __version__
-
     finished = int(sum(row["n_runs"] for row in summaries))
+    versions = sorted({version for row in summaries for version in row["versions"].split()})
     lines = [
         "# Results",
         "",
-        f"Generated from the results database by `{command}` (dgpt-gym {__version__});"
-        " do not edit by hand, re-run the command.",
+        f"Generated from the results database by `{command}` (runs by dgpt-gym "
+        f"{', '.join(versions) or '-'}); do not edit by hand, re-run the command.",
         "",
         f"Runs: {finished} finished of {total_units}; **{len(failures)} failed**.",
         "",

@@ -3,8 +3,9 @@
 Every finished (cell, seed, tracker) run is one row, committed as soon as the run finishes,
 so an interrupted sweep (Ctrl-C, a killed process) loses no finished row. The row's key is a
 hash of its whole configuration (tracker id and arguments, environment arguments, seed):
-re-running a sweep skips the keys already stored with status ``"ok"`` and never duplicates
-one. Failed runs are stored with their error and retried by the next run of the sweep.
+re-running a sweep skips the keys already stored with status ``"ok"`` by the same dgpt-gym
+version and never duplicates one. Failed runs, and runs of another version (whose numbers
+may differ), are run again and replaced.
 """
 
 from __future__ import annotations
@@ -73,10 +74,12 @@ class ResultsStore:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def finished_keys(self) -> set[str]:
-        """Keys of the runs stored with status ``"ok"``."""
-        cursor = self._connection.execute("SELECT run_key FROM runs WHERE status = 'ok'")
-        return {key for (key,) in cursor}
+    def finished_keys(self, version: str | None = None) -> set[str]:
+        """Keys of the runs stored with status ``"ok"`` (by dgpt-gym ``version`` if given)."""
+        query, parameters = "SELECT run_key FROM runs WHERE status = 'ok'", ()
+        if version is not None:
+            query, parameters = query + " AND version = ?", (version,)
+        return {key for (key,) in self._connection.execute(query, parameters)}
 
     def add(self, unit, status: str, metrics: dict | None, error: str | None, runtime_s: float):
         """Store the outcome of ``unit`` (a :class:`dgpt_gym.sweep.RunUnit`), replacing an

@@ -322,8 +322,8 @@ def run_sweep(
     progress: bool = True,
     batch_size: int = DEFAULT_BATCH_SIZE,
 ) -> SweepReport:
-    """Run every unit of ``grids`` not yet finished in the store at ``out``, storing each
-    outcome as soon as it arrives.
+    """Run every unit of ``grids`` not yet finished in the store at ``out`` by this version
+    of dgpt-gym, storing each outcome as soon as it arrives.
 
     Args:
         grids: the sweep.
@@ -344,8 +344,10 @@ def run_sweep(
         workers = os.cpu_count() or 1
     check_integer("workers", workers, low=1)
     failed, errors = 0, []
+    from dgpt_gym import __version__
+
     with ResultsStore(out) as store:
-        finished = store.finished_keys()
+        finished = store.finished_keys(__version__)  # another version's rows are re-run
         todo = [unit for unit in units if unit.key not in finished]
         blocks = make_blocks(todo, batch_size)
         results = _dask_results(blocks, scheduler) if scheduler else _local_results(blocks, workers)
@@ -365,9 +367,9 @@ def run_sweep(
 
 
 def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:
-    """Per-cell summaries (:func:`summarize_runs`, seeds in order) of the sweep's finished
-    runs in the store at ``out``, in the grids' order, and the stored rows of its failed
-    runs."""
+    """Per-cell summaries (:func:`summarize_runs`, seeds in order, and the dgpt-gym
+    ``versions`` that produced the runs) of the sweep's finished runs in the store at
+    ``out``, in the grids' order, and the stored rows of its failed runs."""
     units = sweep_units(grids)
     keys = {unit.key for unit in units}
     with ResultsStore(out) as store:
@@ -384,6 +386,11 @@ def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict],
             failures.append(row)
             continue
         by_cell.setdefault(unit.cell, []).append({"seed": unit.seed, **row["metrics"]})
+    versions_of_cell: dict[tuple, set[str]] = {}
+    for unit in units:
+        row = stored.get(unit.key)
+        if row is not None and row["status"] == "ok":
+            versions_of_cell.setdefault(unit.cell, set()).add(row["version"])
     summaries = []
     for cell, runs in by_cell.items():
         tracker, scenario, noise, clutter = cell
@@ -396,6 +403,7 @@ def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict],
                 "clutter_rate": clutter,
                 "window": window,
                 **summarize_runs(sorted(runs, key=lambda run: run["seed"])),
+                "versions": " ".join(sorted(versions_of_cell[cell])),
             }
         )
     return summaries, failures

@@ -90,6 +90,19 @@ def test_rerun_skips_finished_runs(tmp_path):
     assert summaries[0]["n_runs"] == 3 and failures == []  # only the grid's own seeds
 
 
+def test_runs_of_another_version_are_run_again_and_replaced(tmp_path, monkeypatch):
+    import dgpt_gym
+
+    grid = Grid(trackers=("centroid",), scenarios=("S1",), clutter_rates=(1.0,), runs=2)
+    run_sweep([grid], tmp_path, workers=1, progress=False)
+    monkeypatch.setattr(dgpt_gym, "__version__", "99.0")
+    again = run_sweep([grid], tmp_path, workers=1, progress=False)
+    assert (again.already_finished, again.ran) == (0, 2)
+    with sqlite3.connect(tmp_path / DATABASE_NAME) as connection:
+        assert connection.execute("SELECT DISTINCT version FROM runs").fetchall() == [("99.0",)]
+    assert summarize_store([grid], tmp_path)[0][0]["versions"] == "99.0"
+
+
 def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
     args = [
         sys.executable,
