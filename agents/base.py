@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import abc
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -72,6 +73,14 @@ class TrackerBase(abc.ABC):
     @abc.abstractmethod
     def update(self, obs: dict) -> Estimate:
         """Take the observation of step t and return the estimate of p_t."""
+
+    @classmethod
+    def update_batch(cls, trackers: Sequence[TrackerBase], observations: Sequence[dict]) -> list:
+        """One step of many episodes in lockstep: ``trackers[i].update(observations[i])``
+        for every i (:func:`dgpt_gym.evaluation.run_episodes` calls this). A tracker class
+        that can share work across episodes overrides it (:class:`agents.dgpt.DGPT`
+        batches its learning and prediction); the estimates must equal the one-by-one ones."""
+        return [tracker.update(obs) for tracker, obs in zip(trackers, observations)]
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         if self.spec_ is None:

@@ -182,7 +182,8 @@ class DGPT(TrackerBase):
 
     @classmethod
     def update_batch(cls, trackers: Sequence[DGPT], observations: Sequence[dict]) -> list[Estimate]:
-        """:func:`update_batch`: one step of many episodes in lockstep."""
+        """One step of many episodes in lockstep, batching learning and prediction
+        (:func:`update_batch`)."""
         return update_batch(trackers, observations)
 
     def _numerics_key(self) -> tuple:
