@@ -147,6 +147,11 @@ class DGPT(TrackerBase):
         row = np.log([INITIAL_HYPERPARAMETERS[name] for name in self._named_parameters()])
         return np.tile(row, (2, 1))
 
+    def initial_curvature(self) -> np.ndarray:
+        """(2, p, p) NaN: no BFGS curvature before the first fit of an episode."""
+        p = len(self._named_parameters())
+        return np.full((2, p, p), np.nan)
+
     def bounds(self) -> np.ndarray:
         """(p, 2) bounds of the log hyperparameters."""
         return np.log([HYPERPARAMETER_BOUNDS[name] for name in self._named_parameters()])
@@ -157,6 +162,7 @@ class DGPT(TrackerBase):
         self.spec_ = spec
         self.window_ = SlidingWindow(self.window)
         self.log_params_ = self.initial_log_params()
+        self.curvature_ = self.initial_curvature()  # BFGS inverse Hessians of the last fit
         self.estimate_: np.ndarray | None = None
         self.prior_next_: tuple[np.ndarray, np.ndarray] | None = None
         self.expert_sensors_ = np.empty(0, dtype=np.int64)
@@ -304,16 +310,21 @@ class _Group:
         self.valid = self.data.experts[:, None, :]  # (E, 1, M)
 
     def fit(self, log_params: np.ndarray) -> np.ndarray:
-        """Step 3: the warm-started maximum-likelihood fit of every episode's (2, p)."""
+        """Step 3: the maximum-likelihood fit of every episode's (2, p), warm-started from
+        the last step's hyperparameters and BFGS curvature."""
         result = gp.fit_hyperparameters(
             log_params,
             self.data.training,
             bounds=self.first.bounds(),
             max_iterations=self.first.max_iterations,
             gradient_tolerance=FIT_GRADIENT_TOLERANCE,
+            inverse_hessian=np.stack([tracker.curvature_ for tracker in self.trackers]),
         )
-        for tracker, kept in zip(self.trackers, result.kept_start):
+        for tracker, kept, curvature in zip(
+            self.trackers, result.kept_start, result.inverse_hessian
+        ):
             tracker.fit_failures_ += int(np.any(kept))
+            tracker.curvature_ = curvature
         return result.log_params
 
     def factorize(self, log_params: np.ndarray) -> gp.Factorization:
@@ -324,6 +335,8 @@ class _Group:
         broken = np.any(fact.failed, axis=-1)
         if np.any(broken):
             log_params[broken] = self.first.initial_log_params()
+            for index in np.flatnonzero(broken):
+                self.trackers[index].curvature_ = self.first.initial_curvature()
             fact = gp.factorize(log_params, self.data.training)
             fact.check()
         return fact

@@ -299,6 +299,7 @@ class FitResult:
     kept_start: np.ndarray
     n_evaluations: int
     message: str
+    inverse_hessian: np.ndarray | None = None
 
 
 def fit_hyperparameters(
@@ -309,6 +310,7 @@ def fit_hyperparameters(
     bounds: np.ndarray | None = None,
     max_iterations: int = 50,
     gradient_tolerance: float = 1e-5,
+    inverse_hessian: np.ndarray | None = None,
 ) -> FitResult:
     """Maximum-likelihood hyperparameters in log space, warm-started at ``log_params``
     (*B, p): every problem of the batch is fitted on its own, all of them with one
@@ -333,7 +335,12 @@ def fit_hyperparameters(
 
     try:
         result = optimize.minimize_in_box(
-            negative_log_likelihood, start, bounds, max_iterations, gradient_tolerance
+            negative_log_likelihood,
+            start,
+            bounds,
+            max_iterations,
+            gradient_tolerance,
+            inverse_hessian=inverse_hessian,
         )
     except (NumericalError, np.linalg.LinAlgError, FloatingPointError) as error:
         value, _ = _safe_likelihood(start, data)
@@ -349,7 +356,13 @@ def fit_hyperparameters(
             for code, count in zip(codes.tolist(), counts.tolist())
         )
     return FitResult(
-        result.x, -result.value, converged, result.failed, result.n_evaluations, message
+        result.x,
+        -result.value,
+        converged,
+        result.failed,
+        result.n_evaluations,
+        message,
+        result.inverse_hessian,
     )
 
 

@@ -39,7 +39,8 @@ class BoxResult:
     """Outcome per problem (leading shape ``S`` of the start): ``x`` (S, p), ``value`` (S,)
     and ``gradient`` (S, p) there, ``status`` (S,) a key of :data:`STATUS_MESSAGES`,
     ``iterations`` (S,) accepted steps; ``n_evaluations`` rounds of the objective (each
-    evaluates every problem)."""
+    evaluates every problem); ``inverse_hessian`` (S, p, p) the final BFGS approximation,
+    NaN where no curvature was gathered (to warm-start a related problem)."""
 
     x: np.ndarray
     value: np.ndarray
@@ -47,6 +48,7 @@ class BoxResult:
     status: np.ndarray
     iterations: np.ndarray
     n_evaluations: int
+    inverse_hessian: np.ndarray
 
     @property
     def converged(self) -> np.ndarray:
@@ -73,21 +75,21 @@ def _bfgs_update(inverse_hessian, s, y, fresh):
     """BFGS update of the inverse Hessian H with step s and gradient change y (N&W eq.
     (6.17)); where ``fresh`` (no curvature yet) H is first scaled to s.y / y.y I (eq.
     (6.20)). Problems with s.y <= 0 keep H."""
-    sy = np.sum(s * y, axis=-1)
-    yy = np.sum(y * y, axis=-1)
-    curved = sy > 1e-12 * np.sqrt(np.sum(s * s, axis=-1) * yy)
-    scale = np.where(curved, sy / np.where(yy > 0, yy, 1.0), 1.0)
-    eye = np.eye(s.shape[-1])
-    H = np.where(fresh[:, None, None], scale[:, None, None] * eye, inverse_hessian)
-    rho = np.where(curved, 1.0 / np.where(curved, sy, 1.0), 0.0)
+    sy = (s * y).sum(axis=-1)
+    yy = (y * y).sum(axis=-1)
+    curved = sy > 1e-12 * np.sqrt((s * s).sum(axis=-1) * yy)
+    H = inverse_hessian
+    if fresh.any():
+        scale = np.where(curved, sy / np.where(yy > 0, yy, 1.0), 1.0)
+        H = np.where(fresh[:, None, None], scale[:, None, None] * np.eye(s.shape[-1]), H)
+    rho = np.where(curved, 1.0 / np.where(curved, sy, 1.0), 0.0)[:, None, None]
     Hy = _matvec(H, y)
-    yHy = np.sum(y * Hy, axis=-1)
-    outer_s = s[:, :, None] * s[:, None, :]
+    yHy = (y * Hy).sum(axis=-1)[:, None, None]
     cross = Hy[:, :, None] * s[:, None, :]
     updated = (
         H
-        - rho[:, None, None] * (cross + np.swapaxes(cross, -1, -2))
-        + (rho + rho * rho * yHy)[:, None, None] * outer_s
+        - rho * (cross + np.swapaxes(cross, -1, -2))
+        + (rho + rho * rho * yHy) * (s[:, :, None] * s[:, None, :])
     )
     return np.where(curved[:, None, None], updated, inverse_hessian), fresh & ~curved
 
@@ -99,6 +101,7 @@ def minimize_in_box(
     max_iterations: int = 50,
     gradient_tolerance: float = 1e-5,
     max_step: float = 1.0,
+    inverse_hessian: np.ndarray | None = None,
 ) -> BoxResult:
     """Minimise independent problems ``fun`` over the box ``bounds``.
 
@@ -114,6 +117,9 @@ def minimize_in_box(
             gradient (:func:`projected_gradient`) is at most this.
         max_step: the first step of a problem, which has no curvature information yet, is
             scaled to at most this in every coordinate.
+        inverse_hessian: (*S, p, p) starting BFGS approximations of the inverse Hessians
+            (a previous result's, when the problems change little from call to call); NaN
+            or None where there is none.
 
     Each iteration takes the quasi-Newton direction on the coordinates not held at a bound,
     moves along the projection of that ray onto the box and backtracks (safeguarded
@@ -136,7 +142,7 @@ def minimize_in_box(
         value, gradient = fun(points)
         value = np.asarray(value, dtype=float).reshape(n_problems)
         gradient = np.asarray(gradient, dtype=float).reshape(n_problems, p)
-        finite = np.isfinite(value) & np.all(np.isfinite(gradient), axis=-1)
+        finite = np.isfinite(value) & np.isfinite(gradient).all(axis=-1)
         return value, gradient, finite
 
     value, gradient, finite = evaluate(x)
@@ -145,30 +151,37 @@ def minimize_in_box(
     gradient = np.where(finite[:, None], gradient, 0.0)
     status[(status == RUNNING) & _small(x, gradient, bounds, gradient_tolerance)] = CONVERGED
     iterations = np.zeros(n_problems, dtype=np.int64)
-    inverse_hessian = np.broadcast_to(np.eye(p), (n_problems, p, p)).copy()
-    fresh = np.ones(n_problems, dtype=bool)
+    if inverse_hessian is None:
+        fresh = np.ones(n_problems, dtype=bool)
+        inverse_hessian = np.broadcast_to(np.eye(p), (n_problems, p, p)).copy()
+    else:
+        inverse_hessian = np.asarray(inverse_hessian, dtype=float).reshape(n_problems, p, p)
+        fresh = ~np.all(np.isfinite(inverse_hessian), axis=(-1, -2))
+        inverse_hessian = np.where(fresh[:, None, None], np.eye(p), inverse_hessian)
     direction = np.zeros_like(x)
     step_length = np.ones(n_problems)
     backtracks = np.zeros(n_problems, dtype=np.int64)
     steepest = np.zeros(n_problems, dtype=bool)  # retrying an iteration along -g
     new_direction = status == RUNNING
     max_rounds = 2 * max_iterations * (_MAX_BACKTRACKS + 1)
-    while np.any(status == RUNNING) and n_evaluations <= max_rounds:
-        if np.any(new_direction):
+    while (status == RUNNING).any() and n_evaluations <= max_rounds:
+        if new_direction.any():
             candidate = _direction(x, gradient, inverse_hessian, fresh, steepest, bounds, max_step)
             direction = np.where(new_direction[:, None], candidate, direction)
             step_length = np.where(new_direction, 1.0, step_length)
             backtracks = np.where(new_direction, 0, backtracks)
         running = status == RUNNING
         trial = np.where(
-            running[:, None], np.clip(x + step_length[:, None] * direction, lower, upper), x
+            running[:, None],
+            np.minimum(np.maximum(x + step_length[:, None] * direction, lower), upper),
+            x,
         )
         trial_value, trial_gradient, trial_finite = evaluate(trial)
         n_evaluations += 1
         step = trial - x
-        slope = np.sum(gradient * step, axis=-1)
+        slope = (gradient * step).sum(axis=-1)
         accepted = running & trial_finite & (slope < 0) & (trial_value <= value + _ARMIJO * slope)
-        if np.any(accepted):
+        if accepted.any():
             # the gradient change on the coordinates that moved: the curvature of the face
             # the step ran along (coordinates held at a bound would add spurious terms)
             y = np.where(accepted[:, None] & (step != 0), trial_gradient - gradient, 0.0)
@@ -183,19 +196,23 @@ def minimize_in_box(
             status[accepted & small] = CONVERGED
             status[accepted & ~small & (iterations >= max_iterations)] = ITERATION_LIMIT
         steepest &= ~accepted
+        new_direction = accepted & (status == RUNNING)
         rejected = running & ~accepted
+        if not rejected.any():  # the usual round: the full step was taken everywhere
+            continue
         shrunk = _backtrack(step_length, slope, value, trial_value, trial_finite)
         step_length = np.where(rejected, shrunk, step_length)
         backtracks += rejected
         stuck = rejected & ((backtracks > _MAX_BACKTRACKS) | (slope >= 0))
-        # a quasi-Newton direction that finds no decrease is retried once along -g
-        # with fresh curvature; a steepest-descent one that finds none ends the problem
-        status[stuck & steepest] = LINE_SEARCH_FAILED
-        retry = stuck & ~steepest
-        steepest |= retry
-        fresh |= retry
-        inverse_hessian = np.where(retry[:, None, None], np.eye(p), inverse_hessian)
-        new_direction = (accepted & (status == RUNNING)) | retry
+        if stuck.any():
+            # a quasi-Newton direction that finds no decrease is retried once along -g
+            # with fresh curvature; a steepest-descent one that finds none ends the problem
+            status[stuck & steepest] = LINE_SEARCH_FAILED
+            retry = stuck & ~steepest
+            steepest |= retry
+            fresh |= retry
+            inverse_hessian = np.where(retry[:, None, None], np.eye(p), inverse_hessian)
+            new_direction |= retry
     status[status == RUNNING] = ITERATION_LIMIT
     return BoxResult(
         x=x.reshape(x0.shape),
@@ -204,11 +221,15 @@ def minimize_in_box(
         status=status.reshape(shape),
         iterations=iterations.reshape(shape),
         n_evaluations=n_evaluations,
+        inverse_hessian=np.where(fresh[:, None, None], np.nan, inverse_hessian).reshape(
+            shape + (p, p)
+        ),
     )
 
 
 def _small(x, gradient, bounds, tolerance) -> np.ndarray:
-    return np.max(np.abs(projected_gradient(x, gradient, bounds)), axis=-1) <= tolerance
+    """Where the projected gradient's largest component is at most ``tolerance``."""
+    return np.abs(projected_gradient(x, gradient, bounds)).max(axis=-1) <= tolerance
 
 
 def _direction(x, gradient, inverse_hessian, fresh, steepest, bounds, max_step):
@@ -219,20 +240,30 @@ def _direction(x, gradient, inverse_hessian, fresh, steepest, bounds, max_step):
     definite). Steepest descent where ``steepest`` or where that fails; scaled to
     ``max_step`` per coordinate while there is no curvature yet."""
     lower, upper = bounds[:, 0], bounds[:, 1]
-    free_gradient = projected_gradient(x, gradient, bounds)
-    free = free_gradient != 0.0
-    for _ in range(x.shape[-1]):
-        restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
-        direction = -_matvec(restricted, np.where(free, gradient, 0.0))
-        leaving = free & (((x <= lower) & (direction < 0)) | ((x >= upper) & (direction > 0)))
-        if not np.any(leaving):
-            break
-        free &= ~leaving
-    direction = np.where(free, direction, 0.0)
-    descent = np.sum(direction * gradient, axis=-1) < 0
+    at_lower, at_upper = x <= lower, x >= upper
+    if (at_lower | at_upper).any():
+        free_gradient = projected_gradient(x, gradient, bounds)
+        free = free_gradient != 0.0
+        for _ in range(x.shape[-1]):
+            restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
+            direction = -_matvec(restricted, np.where(free, gradient, 0.0))
+            leaving = free & ((at_lower & (direction < 0)) | (at_upper & (direction > 0)))
+            if not leaving.any():
+                break
+            free &= ~leaving
+        direction = np.where(free, direction, 0.0)
+    else:  # the interior: the same, without masks (a zero gradient component stays fixed)
+        free_gradient = gradient
+        free = gradient != 0.0
+        if free.all():
+            direction = -_matvec(inverse_hessian, gradient)
+        else:
+            restricted = inverse_hessian * (free[:, :, None] & free[:, None, :])
+            direction = np.where(free, -_matvec(restricted, gradient), 0.0)
+    descent = (direction * gradient).sum(axis=-1) < 0
     fallback = steepest | ~descent
     direction = np.where(fallback[:, None], -free_gradient, direction)
-    largest = np.max(np.abs(direction), axis=-1)
+    largest = np.abs(direction).max(axis=-1)
     first = fresh | fallback
     scale = np.where(first & (largest > max_step), max_step / np.maximum(largest, 1e-300), 1.0)
     return direction * scale[:, None]

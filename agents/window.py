@@ -133,16 +133,15 @@ class ExpertData:
             raise ValueError(
                 f"cannot pad {experts} experts x {points} points to {n_experts} x {n_points}"
             )
-        grow = ((0, n_experts - experts), (0, n_points - points))
-        return ExpertData(
-            sensors=np.pad(self.sensors, grow[0], constant_values=-2),
-            X=np.pad(self.X, ((0, 0), *grow, (0, 0))),
-            z=np.pad(self.z, ((0, 0), *grow)),
-            mask=np.pad(self.mask, grow),
-            intercept=self.intercept,
-            slope=self.slope,
-            trend_covariance=self.trend_covariance,
-        )
+        sensors = np.full(n_experts, -2, dtype=self.sensors.dtype)
+        sensors[:experts] = self.sensors
+        X = np.zeros((2, n_experts, n_points, self.X.shape[-1]))
+        X[:, :experts, :points] = self.X
+        z = np.zeros((2, n_experts, n_points))
+        z[:, :experts, :points] = self.z
+        mask = np.zeros((n_experts, n_points), dtype=bool)
+        mask[:experts, :points] = self.mask
+        return ExpertData(sensors, X, z, mask, self.intercept, self.slope, self.trend_covariance)
 
     @classmethod
     def stack(cls, items: list[ExpertData]) -> ExpertData:

@@ -126,3 +126,20 @@ def test_a_start_at_the_optimum_costs_one_evaluation():
     fun = quadratic(np.eye(2)[None], np.array([[0.3, -0.2]]))
     result = optimize.minimize_in_box(fun, np.array([[0.3, -0.2]]), np.array([[-1, 1]] * 2), 5)
     assert result.n_evaluations == 1 and result.converged[0] and result.iterations[0] == 0
+
+
+def test_a_warm_started_curvature_takes_the_newton_step():
+    """Given the exact inverse Hessian of a quadratic, the first step is Newton's and lands
+    on the (interior) optimum: one iteration, two evaluations. Without it, more are needed;
+    the result hands back a curvature for the next call."""
+    hessian = np.array([[[4.0, 1.0], [1.0, 3.0]]])
+    centre = np.array([[0.3, -0.2]])
+    bounds = np.array([[-1.0, 1.0]] * 2)
+    start = np.array([[0.9, 0.8]])
+    warm = optimize.minimize_in_box(
+        quadratic(hessian, centre), start, bounds, 5, 1e-9, inverse_hessian=np.linalg.inv(hessian)
+    )
+    assert (warm.iterations[0], warm.n_evaluations) == (1, 2) and warm.converged[0]
+    np.testing.assert_allclose(warm.x[0], centre[0], atol=1e-12)
+    cold = optimize.minimize_in_box(quadratic(hessian, centre), start, bounds, 5, 1e-9)
+    assert cold.n_evaluations > 2 and np.all(np.isfinite(cold.inverse_hessian))
