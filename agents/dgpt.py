@@ -10,11 +10,17 @@ Each step t:
    steps (:mod:`agents.window`); each is a local GP on its own summaries, per axis, on time
    (TGP) or on the previous estimate of the coordinate and time (STGP, eqs. (25)-(26)).
 3. **Learning**: the hyperparameters, shared by all experts (one set per axis), maximise
-   the factorized log marginal likelihood, eq. (22), with L-BFGS-B warm-started from the
-   previous step's values (Sec. IV-D); both axes are optimised in one call.
+   the factorized log marginal likelihood, eq. (22), by a few projected-BFGS iterations
+   (:mod:`agents.optimize`) warm-started from the previous step's values and curvature
+   (Sec. IV-D); each axis is its own problem, and all are solved in one batch.
 4. **Prediction**: each expert predicts steps t and t + 1, eqs. (6)-(7); the predictions are
    aggregated by PoE / GPoE / BCM / RBCM (:mod:`agents.aggregation`); the UCB half-width
    comes from Theorem 1 or 2 with the failure probability ``delta`` split over the experts.
+
+Many episodes can be stepped in lockstep (:func:`update_batch`, which ``update`` calls with
+one): steps 1-2 run per episode, steps 3-4 once for all episodes whose expert arrays pad to
+the same shape (:func:`agents.window.padded_size`), and every episode's numbers are bit for
+bit those of the episode alone.
 
 Start of an episode: before any model exists the gate is centred on the coordinate-wise
 median of the step's measurements with a variance of the squared sensing range (a target
@@ -67,7 +73,7 @@ HYPERPARAMETER_BOUNDS = {
     "space_lengthscale": (1.0, 1e4),
     "noise_var": (0.1, 1e4),
 }
-"""L-BFGS-B bounds (m^2, s, m). They encode what the data of a short window cannot: a
+"""Bounds of the fit (m^2, s, m). They encode what the data of a short window cannot: a
 length scale below the sampling period or far beyond the window is not identifiable, and
 without a floor on the signal variance the likelihood of a straight stretch drives the
 model to "trend plus white noise", whose over-confident predictions then make the gate lock
@@ -86,7 +92,8 @@ class DGPT(TrackerBase):
         mean: the GP prior mean over the window (:func:`agents.window.window_prior_mean`):
             ``"linear"`` (least-squares constant-velocity trend, the default), ``"window"``
             (the window's mean) or ``"zero"`` (raw coordinates, as in the paper).
-        max_iterations: L-BFGS-B iterations per step (warm-started, few are needed).
+        max_iterations: quasi-Newton iterations per step and axis (warm-started, few are
+            needed).
         anytime_ucb: use Lemma 2's gamma_t (a bound holding at every step at once, the
             terms of Theorem 3) instead of the one-step gamma of Theorems 1-2.
         gating: weigh each sensor's measurements by eqs. (27)-(28) (the default); False
