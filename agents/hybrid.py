@@ -17,6 +17,7 @@ Two updates, per step:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -184,10 +185,29 @@ class HybridFilter(TrackerBase):
         self.pruned_mass_ = 0.0
 
     def update(self, obs: dict) -> Estimate:
-        if self.spec_ is None:
-            raise RuntimeError("call reset(spec) before update(obs)")
-        prior = self.dgpt.prior_next_
-        learned = self.dgpt.update(obs)
+        return self.update_batch([self], [obs])[0]
+
+    @classmethod
+    def update_batch(
+        cls, trackers: Sequence[HybridFilter], observations: Sequence[dict]
+    ) -> list[Estimate]:
+        """One step of many episodes in lockstep: the wrapped DGPTs step together
+        (:func:`agents.dgpt.update_batch`, exact per episode), then each episode's Poisson
+        update runs on its own."""
+        for tracker in trackers:
+            if tracker.spec_ is None:
+                raise RuntimeError("call reset(spec) before update(obs)")
+        priors = [tracker.dgpt.prior_next_ for tracker in trackers]
+        learned = DGPT.update_batch([tracker.dgpt for tracker in trackers], observations)
+        return [
+            tracker._posterior(obs, prior, estimate)
+            for tracker, obs, prior, estimate in zip(trackers, observations, priors, learned)
+        ]
+
+    def _posterior(self, obs: dict, prior, learned: Estimate) -> Estimate:
+        """The Poisson update of ``prior`` (the DGPT's prediction of this step) by the step's
+        measurements, fed back to the DGPT; ``learned`` (the DGPT's estimate) at the first
+        step, which has no prior."""
         if prior is None:
             return learned
         mask = np.asarray(obs["mask"]).astype(bool)

@@ -122,6 +122,28 @@ def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
         observation, *_ = env.step(estimate.mean)
 
 
+def test_hybrid_filters_in_lockstep_equal_each_alone():
+    """Both variants, TGP and STGP (whose next-step prediction is recomputed from the
+    posterior), stepped together: bit for bit the estimates of each episode alone."""
+    from dgpt_gym.evaluation import run_episodes
+
+    settings = [("hybrid", {}, 0), ("hybrid-paper", {}, 1), ("hybrid", {"inputs": "stgp"}, 2)]
+
+    def env():
+        return gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+
+    alone = [run_episode(env(), make_tracker(t, **kw), seed) for t, kw, seed in settings]
+    together = run_episodes(
+        [env() for _ in settings],
+        [make_tracker(t, **kw) for t, kw, _ in settings],
+        [seed for *_, seed in settings],
+    )
+    for single, batched in zip(alone, together):
+        np.testing.assert_array_equal(single.mean, batched.mean)
+        np.testing.assert_array_equal(single.var, batched.var)
+        np.testing.assert_array_equal(single.ucb, batched.ucb)
+
+
 def test_turn_transition_tends_to_constant_velocity():
     cv = turn_transition(0.0, 1.0)
     np.testing.assert_array_equal(cv, [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]])
