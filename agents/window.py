@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 from collections import deque
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,10 +147,9 @@ class ExpertData:
     @classmethod
     def stack(cls, items: list[ExpertData]) -> ExpertData:
         """Episodes' data of equal shapes stacked on a new leading axis."""
-        return cls(*(np.stack([getattr(item, name) for item in items]) for name in _FIELDS))
-
-
-_FIELDS = ("sensors", "X", "z", "mask", "intercept", "slope", "trend_covariance")
+        return cls(
+            *(np.stack([getattr(item, f.name) for item in items]) for f in dataclasses.fields(cls))
+        )
 
 
 class SlidingWindow:
