@@ -3,9 +3,9 @@ expert arrays for the GP core."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections import deque
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
