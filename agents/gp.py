@@ -291,15 +291,31 @@ class FitResult:
     start): ``log_params`` (S, p) to use and ``log_likelihood`` (S,) there; ``converged``
     (S,) where the projected gradient met the tolerance (a step cut short by the iteration
     limit is used all the same), ``kept_start`` (S,) where the likelihood was not finite at
-    the start, which is then returned; ``n_evaluations`` likelihood rounds."""
+    the start, which is then returned; ``n_evaluations`` likelihood rounds; ``status`` (S,)
+    the optimiser's codes (:data:`agents.optimize.STATUS_MESSAGES`), or ``error`` when the
+    evaluation raised."""
 
     log_params: np.ndarray
     log_likelihood: np.ndarray
     converged: np.ndarray
     kept_start: np.ndarray
     n_evaluations: int
-    message: str
     inverse_hessian: np.ndarray | None = None
+    status: np.ndarray | None = None
+    error: str | None = None
+
+    @property
+    def message(self) -> str:
+        """How the fit ended, in words (built on demand: the fit runs every tracker step)."""
+        if self.error is not None:
+            return self.error
+        if self.n_evaluations == 1 and np.all(self.converged):
+            return "converged at the start"
+        codes, counts = np.unique(self.status, return_counts=True)
+        return "; ".join(
+            f"{count} {optimize.STATUS_MESSAGES[code]}"
+            for code, count in zip(codes.tolist(), counts.tolist())
+        )
 
 
 def fit_hyperparameters(
@@ -345,24 +361,15 @@ def fit_hyperparameters(
     except (NumericalError, np.linalg.LinAlgError, FloatingPointError) as error:
         value, _ = _safe_likelihood(start, data)
         none = np.zeros(shape[:-1], dtype=bool)
-        return FitResult(start, value, none, ~none, 0, str(error))
-    converged = result.converged
-    if result.n_evaluations == 1 and np.all(converged):
-        message = "converged at the start"
-    else:
-        codes, counts = np.unique(result.status, return_counts=True)
-        message = "; ".join(
-            f"{count} {optimize.STATUS_MESSAGES[code]}"
-            for code, count in zip(codes.tolist(), counts.tolist())
-        )
+        return FitResult(start, value, none, ~none, 0, error=str(error))
     return FitResult(
         result.x,
         -result.value,
-        converged,
+        result.converged,
         result.failed,
         result.n_evaluations,
-        message,
         result.inverse_hessian,
+        result.status,
     )
 
 

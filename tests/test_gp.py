@@ -192,6 +192,7 @@ def test_fit_keeps_the_start_when_the_likelihood_breaks(monkeypatch):
     monkeypatch.setattr(gp, "log_marginal_likelihood", broken)
     result = gp.fit_hyperparameters(log_params, X, z, mask)
     assert np.all(result.kept_start) and not np.any(result.converged)
+    assert result.message == "forced"
     np.testing.assert_array_equal(result.log_params, np.clip(log_params, *gp.default_bounds(2).T))
     assert not np.any(np.isnan(result.log_params))
 
