@@ -92,7 +92,17 @@ class DGPTrackEnv(gym.Env):
     ``position`` and ``velocity`` (truth of the step just scored, or of step 0 at reset),
     ``n_target``, ``n_clutter``, ``active_sensors`` (indices of the sensors that sense the
     target), ``overflow``, and after a step ``error``. Reset info also has ``problem_spec``
-    (:class:`~dgpt_gym.problem.ProblemSpec`). Trackers must not read ``info``: it holds the truth.
+    (:class:`~dgpt_gym.problem.ProblemSpec`) and ``scenario`` (the
+    :class:`~dgpt_gym.scenarios.Scenario` and its parameters).
+
+    About the observation returned with it (step ``t = obs["t"]``): ``target_origin``, a
+    (K,) bool array marking its target-originated rows, and the manoeuvre over the interval
+    ending at step t: ``turn_rate`` (rad/s; S2, S3, else None) and ``new_leg`` (the velocity
+    was redrawn at a waypoint; S1, else None).
+
+    Trackers must not read ``info``: it holds the truth. The evaluation loop hands it only
+    to trackers that declare themselves oracles (``oracle = True``, e.g. the clairvoyant
+    accuracy floor; :func:`dgpt_gym.evaluation.run_episodes`).
 
     ## Arguments
 
@@ -242,7 +252,9 @@ class DGPTrackEnv(gym.Env):
         self._prepare_episode()
         self.step_ = 0
         info = self._step_info(0)
+        info.update(self._observation_truth(0))
         info["problem_spec"] = self.problem_spec
+        info["scenario"] = self.scenario
         self.estimates_ = []
         if self.render_mode == "human":
             self.render()
@@ -270,6 +282,7 @@ class DGPTrackEnv(gym.Env):
         self.estimates_.append(estimate)
         self.step_ = step + 1
         truncated = self.step_ == self.n_steps
+        info.update(self._observation_truth(self.step_))
         observation = self._observation(self.step_)
         if self.render_mode == "human":
             self.render()
@@ -309,10 +322,13 @@ class DGPTrackEnv(gym.Env):
         sensor = np.full((self.n_steps + 1, k), -1, dtype=np.int64)
         measurements[step_of_row[keep], slot[keep]] = scans.measurements[keep]
         sensor[step_of_row[keep], slot[keep]] = scans.sensor[keep]
+        target_origin = np.zeros((self.n_steps + 1, k), dtype=bool)
+        target_origin[step_of_row[keep], slot[keep]] = scans.is_target[keep]
         mask = (np.arange(k) < np.r_[kept, 0][:, None]).astype(np.int8)
-        for array in (measurements, sensor, mask):
+        for array in (measurements, sensor, mask, target_origin):
             array.setflags(write=False)
         self._padded = (measurements, sensor, mask)
+        self._target_origin = target_origin
         n_target, n_clutter = scans.counts()
         self._n_target, self._n_clutter = n_target.tolist(), n_clutter.tolist()
         self._overflow = (per_step - kept).tolist()
@@ -328,6 +344,23 @@ class DGPTrackEnv(gym.Env):
             "sensor": sensor[step],
             "mask": mask[step],
             "t": step,
+        }
+
+    def _observation_truth(self, step: int) -> dict:
+        """The truth about the observation of ``step`` that only oracle trackers may read:
+        which rows are target-originated and the manoeuvre over the interval ending at it."""
+        trajectory = self.trajectory_
+        inside = step < self.n_steps
+        return {
+            "target_origin": self._target_origin[step],
+            "turn_rate": (
+                float(trajectory.turn_rate[step])
+                if inside and trajectory.turn_rate is not None
+                else None
+            ),
+            "new_leg": (
+                bool(trajectory.new_leg[step]) if inside and trajectory.new_leg is not None else None
+            ),
         }
 
     def _step_info(self, step: int) -> dict:

@@ -1,7 +1,15 @@
 """The evaluation loop: one episode of a tracker in an environment, and Monte Carlo runs.
 
 ``run_episode`` feeds each observation to ``tracker.update`` and steps the environment with
-the estimate; the truth comes from ``info`` and never reaches the tracker.
+the estimate; the truth comes from ``info`` and never reaches the tracker, unless the
+tracker declares itself an oracle (:func:`is_oracle`).
+
+Oracles. A tracker whose class sets ``oracle = True`` (the clairvoyant accuracy floor,
+:class:`baselines.clairvoyant.ClairvoyantFilter`) is reset with ``reset(spec, seed=seed,
+truth=info)`` and stepped with ``update(obs, truth=info)``, ``info`` being the environment's
+info returned with ``obs`` (its ``target_origin`` rows and manoeuvre, see
+:class:`dgpt_gym.env.DGPTrackEnv`). Every other tracker is called as ``reset(spec, seed)``
+and ``update(obs)`` and never receives ``info``.
 """
 
 from __future__ import annotations
@@ -13,11 +21,28 @@ from dataclasses import dataclass, field
 
 import gymnasium as gym
 import numpy as np
+from scipy import stats
 from tqdm.auto import tqdm
 
 from dgpt_gym import metrics
 
-__all__ = ["EpisodeResult", "run_episode", "run_episodes", "run_monte_carlo", "summarize_runs"]
+__all__ = [
+    "EpisodeResult",
+    "is_oracle",
+    "run_episode",
+    "run_episodes",
+    "run_monte_carlo",
+    "summarize_runs",
+    "add_floor_ratios",
+    "format_summary_table",
+    "interval_half_width",
+]
+
+
+def is_oracle(tracker) -> bool:
+    """True for a tracker that declares itself an oracle (``oracle = True`` on its class):
+    only such trackers are handed the environment's ``info``, which holds the truth."""
+    return getattr(type(tracker), "oracle", False) is True
 
 
 @dataclass(frozen=True)
@@ -34,9 +59,20 @@ class EpisodeResult:
     step_time: np.ndarray
     n_measurements: np.ndarray
     n_detecting: np.ndarray
+    sensing_range: float = 50.0
 
     def metrics(self) -> dict[str, float]:
-        """The episode's metrics (module :mod:`dgpt_gym.metrics`), flattened per axis."""
+        """The episode's metrics (module :mod:`dgpt_gym.metrics`), flat, as plain floats.
+
+        Per axis (suffix ``_x`` / ``_y``): ``nrmse``, ``rmse``, ``ci_coverage`` and
+        ``ci_width`` (3 sigma), ``ucb_coverage`` and ``ucb_width`` (NaN without a UCB),
+        ``coverage_{1,2,3}sigma``. In 2-D: ``rmse_2d``, ``anees`` and ``nees_median``.
+        ``rmse_2d``, ``anees``, ``nees_median`` and the sigma coverages also on the steps
+        where some sensor senses the target (suffix ``_detected``) and on coverage-gap
+        steps (``_gap``; NaN when the episode has none). ``track_lost`` (0 or 1) and
+        ``lost_step_fraction`` (:func:`dgpt_gym.metrics.track_loss` at twice the sensing
+        range), ``step_time_ms`` (median) and ``no_detection_fraction``.
+        """
         std = np.sqrt(np.maximum(self.var, 0.0))
         ci = metrics.CI_SIGMAS * std
         values = {
@@ -56,9 +92,36 @@ class EpisodeResult:
         if not has_ucb:
             for key in ("ucb_coverage_x", "ucb_coverage_y", "ucb_width_x", "ucb_width_y"):
                 flat[key] = float("nan")
+        detected = self.n_detecting > 0
+        for suffix, steps in (("", slice(None)), ("_detected", detected), ("_gap", ~detected)):
+            flat.update(self._consistency(steps, suffix))
+        lost = metrics.track_loss(
+            self.mean, self.truth, metrics.TRACK_LOSS_RANGES * self.sensing_range
+        )
+        flat["track_lost"] = float(np.any(lost))
+        flat["lost_step_fraction"] = float(np.mean(lost))
         flat["step_time_ms"] = float(1e3 * np.median(self.step_time))
         flat["no_detection_fraction"] = float(np.mean(self.n_detecting == 0))
         return flat
+
+    def _consistency(self, steps, suffix: str) -> dict[str, float]:
+        """RMSE, NEES and sigma coverage over ``steps`` (NaN when there are none)."""
+        mean, truth, var = self.mean[steps], self.truth[steps], self.var[steps]
+        keys = ["rmse_2d", "anees", "nees_median"] + [
+            f"coverage_{k}sigma_{axis}" for k in (1, 2, 3) for axis in "xy"
+        ]
+        if mean.shape[0] == 0:
+            return {key + suffix: float("nan") for key in keys}
+        errors = metrics.nees(mean, truth, var)
+        values = {
+            "rmse_2d": metrics.rmse_2d(mean, truth),
+            "anees": float(np.mean(errors)),
+            "nees_median": float(np.median(errors)),
+        }
+        for k in (1, 2, 3):
+            covered = metrics.sigma_coverage(mean, truth, var, k)
+            values[f"coverage_{k}sigma_x"], values[f"coverage_{k}sigma_y"] = map(float, covered)
+        return {key + suffix: values[key] for key in keys}
 
 
 def run_episode(env: gym.Env, tracker, seed: int | None) -> EpisodeResult:
@@ -86,19 +149,34 @@ def run_episodes(
             "envs, trackers and seeds must have the same length; got "
             f"{len(envs)}, {len(trackers)} and {len(seeds)}"
         )
-    observations = []
+    observations, truths, records = [], [], []
     for env, tracker, seed in zip(envs, trackers, seeds):
         observation, info = env.reset(seed=seed)
-        tracker.reset(info["problem_spec"], seed=seed)
+        if is_oracle(tracker):
+            tracker.reset(info["problem_spec"], seed=seed, truth=info)
+        else:
+            tracker.reset(info["problem_spec"], seed=seed)
         observations.append(observation)
+        truths.append(info)
+        records.append(_EpisodeRecord(sensing_range=info["problem_spec"].sensing_range))
     update_batch = getattr(type(trackers[0]), "update_batch", None) if trackers else None
     if update_batch is None or any(type(tracker) is not type(trackers[0]) for tracker in trackers):
         update_batch = _update_each
-    records = [_EpisodeRecord() for _ in envs]
+    if any(is_oracle(tracker) for tracker in trackers):
+        update_batch = _update_each
     running = list(range(len(envs)))
     while running:
         started = time.perf_counter()
-        estimates = update_batch([trackers[i] for i in running], [observations[i] for i in running])
+        if update_batch is _update_each:
+            estimates = _update_each(
+                [trackers[i] for i in running],
+                [observations[i] for i in running],
+                [truths[i] for i in running],
+            )
+        else:
+            estimates = update_batch(
+                [trackers[i] for i in running], [observations[i] for i in running]
+            )
         elapsed = (time.perf_counter() - started) / len(running)
         still_running = []
         for index, estimate in zip(running, estimates):
@@ -109,7 +187,7 @@ def run_episodes(
             record.ucb.append(np.full(2, np.nan) if estimate.ucb is None else estimate.ucb)
             record.n_measurements.append(int(np.sum(observation["mask"])))
             observation, _, terminated, truncated, info = envs[index].step(estimate.mean)
-            observations[index] = observation
+            observations[index], truths[index] = observation, info
             record.truth.append(info["position"])
             record.n_detecting.append(len(info["active_sensors"]))
             if not (terminated or truncated):
@@ -118,14 +196,19 @@ def run_episodes(
     return [record.result() for record in records]
 
 
-def _update_each(trackers, observations):
-    return [tracker.update(observation) for tracker, observation in zip(trackers, observations)]
+def _update_each(trackers, observations, truths):
+    """One ``update`` per tracker; only oracles are handed their episode's ``info``."""
+    return [
+        tracker.update(observation, truth=truth) if is_oracle(tracker) else tracker.update(observation)
+        for tracker, observation, truth in zip(trackers, observations, truths)
+    ]
 
 
 @dataclass
 class _EpisodeRecord:
     """The per-step lists of one episode while it runs."""
 
+    sensing_range: float = 50.0
     truth: list = field(default_factory=list)
     mean: list = field(default_factory=list)
     var: list = field(default_factory=list)
@@ -143,6 +226,7 @@ class _EpisodeRecord:
             step_time=np.asarray(self.step_time),
             n_measurements=np.asarray(self.n_measurements),
             n_detecting=np.asarray(self.n_detecting),
+            sensing_range=self.sensing_range,
         )
 
 
@@ -169,26 +253,93 @@ def run_monte_carlo(
     return rows
 
 
+INTERVAL_KEYS = ("nrmse_x", "nrmse_y", "rmse_2d")
+"""Metrics whose 95 % interval over runs :func:`summarize_runs` reports (``<key>_ci95``)."""
+
+
+def interval_half_width(values) -> float:
+    """Half-width of the 95 % Student-t interval of the mean of ``values`` (NaN ignored);
+    NaN for fewer than two values."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size < 2:
+        return float("nan")
+    quantile = stats.t.ppf(0.975, values.size - 1)
+    return float(quantile * np.std(values, ddof=1) / np.sqrt(values.size))
+
+
 def summarize_runs(rows: list[dict[str, float]]) -> dict[str, float]:
-    """Mean of every metric over runs, and the STD of the RMSE over runs (``rmse_std_*``)."""
+    """Mean of every metric over runs (NaN ignored), the STD of the RMSE over runs
+    (``rmse_std_*``), the 95 % interval half-widths of :data:`INTERVAL_KEYS`
+    (``<key>_ci95``), the track-loss rate (share of runs that lost the track) and
+    ``n_runs``."""
     keys = [key for key in rows[0] if key != "seed"]
     with warnings.catch_warnings():  # a metric NaN in every run (no UCB) stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
-        summary = {key: float(np.nanmean([row[key] for row in rows])) for key in keys}
+        summary = {key: float(np.nanmean([row.get(key, np.nan) for row in rows])) for key in keys}
     rmse_runs = np.array([[row["rmse_x"], row["rmse_y"]] for row in rows])
     summary["rmse_std_x"], summary["rmse_std_y"] = map(float, metrics.std_over_runs(rmse_runs))
+    for key in INTERVAL_KEYS:
+        if key in rows[0]:
+            summary[f"{key}_ci95"] = interval_half_width([row[key] for row in rows])
+    if "track_lost" in rows[0]:
+        summary["track_loss_rate"] = summary["track_lost"]
     summary["n_runs"] = len(rows)
     return summary
 
 
-def format_nrmse_table(rows: list[dict]) -> str:
-    """Markdown table of mean NRMSE (percent) per cell and axis, the paper's unit."""
-    header = "| tracker | scenario | noise_std | clutter_rate | NRMSE X % | NRMSE Y % | runs |"
-    lines = [header, "|---|---|---|---|---|---|---|"]
+def add_floor_ratios(summaries: list[dict], floor: str = "clairvoyant") -> list[dict]:
+    """Set ``rmse_ratio_to_floor`` on every per-cell summary: its ``rmse_2d`` divided by that
+    of the ``floor`` tracker on the same (scenario, noise_std, clutter_rate); NaN where the
+    cell has no floor run (or the summary predates ``rmse_2d``)."""
+    floors = {
+        (row["scenario"], row["noise_std"], row["clutter_rate"]): row.get("rmse_2d", np.nan)
+        for row in summaries
+        if row["tracker"] == floor
+    }
+    for row in summaries:
+        reference = floors.get((row["scenario"], row["noise_std"], row["clutter_rate"]), np.nan)
+        value = row.get("rmse_2d", np.nan)
+        row["rmse_ratio_to_floor"] = (
+            float(value / reference) if np.isfinite(reference) and reference > 0 else float("nan")
+        )
+    return summaries
+
+
+def _cell(value, scale: float = 1.0, digits: int = 2, interval=None) -> str:
+    if value is None or not np.isfinite(value):
+        return "-"
+    text = f"{scale * value:.{digits}f}"
+    if interval is not None and np.isfinite(interval):
+        text += f" ± {scale * interval:.{digits}f}"
+    return text
+
+
+def format_summary_table(rows: list[dict]) -> str:
+    """The printed summary, one Markdown row per cell: NRMSE % per axis with its 95 %
+    interval over runs and the paper's value where the paper has one, the 2-D RMSE (m)
+    with its interval, its ratio to the clairvoyant floor, ANEES (nominal 2), the 3-sigma
+    coverage per axis (nominal 99.7 %), the track-loss rate and the runs."""
+    from dgpt_gym.report import paper_value
+
+    header = (
+        "| tracker | scenario | noise_std | clutter_rate | NRMSE X % | paper X | NRMSE Y % |"
+        " paper Y | RMSE m | x floor | ANEES | 3 sigma X / Y % | loss % | runs |"
+    )
+    lines = [header, "|" + "---|" * 14]
     for row in rows:
+        paper = [paper_value(row, axis) for axis in "xy"]
+        coverage = (
+            f"{_cell(row.get('coverage_3sigma_x'), 100, 1)} / "
+            f"{_cell(row.get('coverage_3sigma_y'), 100, 1)}"
+        )
         lines.append(
             f"| {row['tracker']} | {row['scenario']} | {row['noise_std']:g} | "
-            f"{row['clutter_rate']:g} | {100 * row['nrmse_x']:.2f} | {100 * row['nrmse_y']:.2f} | "
-            f"{row['n_runs']} |"
+            f"{row['clutter_rate']:g} | "
+            f"{_cell(row['nrmse_x'], 100, 2, row.get('nrmse_x_ci95'))} | {_cell(paper[0])} | "
+            f"{_cell(row['nrmse_y'], 100, 2, row.get('nrmse_y_ci95'))} | {_cell(paper[1])} | "
+            f"{_cell(row.get('rmse_2d'), 1, 1, row.get('rmse_2d_ci95'))} | "
+            f"{_cell(row.get('rmse_ratio_to_floor'))} | {_cell(row.get('anees'))} | "
+            f"{coverage} | {_cell(row.get('track_loss_rate'), 100, 0)} | {row['n_runs']} |"
         )
     return "\n".join(lines)

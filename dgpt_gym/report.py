@@ -16,6 +16,7 @@ import numpy as np
 __all__ = [
     "PAPER_NRMSE_PATH",
     "paper_nrmse",
+    "paper_value",
     "tracker_id",
     "paper_table_markdown",
     "summary_against_paper",
@@ -51,6 +52,18 @@ def tracker_id(approach: str, inputs: str) -> str:
     """The registered tracker of a paper approach: ``gp`` / ``dgpt-rbcm`` / ``dgpt-gpoe``
     with ``-stgp`` appended for spatio-temporal inputs."""
     return approach if inputs == "tgp" else f"{approach}-stgp"
+
+
+def paper_value(row: dict, axis: str) -> float | None:
+    """The paper's NRMSE (%) for a per-cell summary ``row`` and ``axis``, or None where the
+    paper has no such cell (other trackers, noise levels or clutter rates)."""
+    tracker = row["tracker"]
+    inputs = "stgp" if tracker.endswith("-stgp") else "tgp"
+    approach = tracker.removesuffix("-stgp")
+    reference = paper_nrmse().get(
+        (inputs, row["scenario"], row["noise_std"], row["clutter_rate"], approach, axis)
+    )
+    return None if reference is None else reference[0]
 
 
 def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:

@@ -40,16 +40,28 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Trajectory:
-    """A sampled target path: ``positions`` and ``velocities`` of shape (n_steps, 2), m and m/s."""
+    """A sampled target path: ``positions`` and ``velocities`` of shape (n_steps, 2), m and m/s.
+
+    The manoeuvre record, the truth a clairvoyant filter is told (``None`` where the
+    scenario has no such switching):
+
+    - ``turn_rate`` (n_steps,): the coordinated-turn rate over the interval ending at step
+      k, rad/s (0 on straight legs and at k = 0); S2 and S3.
+    - ``new_leg`` (n_steps,) bool: the velocity was redrawn over the interval ending at step
+      k (a waypoint); S1.
+    """
 
     positions: np.ndarray
     velocities: np.ndarray
     dt: float
+    turn_rate: np.ndarray | None = None
+    new_leg: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("positions", "velocities"):
+        for name in ("positions", "velocities", "turn_rate", "new_leg"):
             array = getattr(self, name)
-            array.setflags(write=False)
+            if array is not None:
+                array.setflags(write=False)
         if self.positions.shape != self.velocities.shape or self.positions.shape[1:] != (2,):
             raise ValueError(
                 "positions and velocities must both have shape (n_steps, 2); got "
@@ -104,19 +116,20 @@ class Scenario(abc.ABC):
     max_attempts: int = 2000
 
     @abc.abstractmethod
-    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (starting at the origin) and velocities of one unconstrained path."""
+    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
+        """Positions (starting at the origin) and velocities of one unconstrained path, and
+        its manoeuvre record (:class:`Trajectory`'s ``turn_rate`` / ``new_leg``)."""
 
     def sample(self, rng: np.random.Generator) -> Trajectory:
         """Draw a trajectory inside ``[margin, area - margin]^2`` (module docstring)."""
         low = self.boundary_margin
         high = self.area - self.boundary_margin
         for _ in range(self.max_attempts):
-            positions, velocities = self._unconstrained(rng)
+            positions, velocities, manoeuvres = self._unconstrained(rng)
             lower, upper = positions.min(axis=0), positions.max(axis=0)
             if np.all(upper - lower <= high - low):
                 offset = rng.uniform(low - lower, high - upper)
-                return Trajectory(positions + offset, velocities, self.dt)
+                return Trajectory(positions + offset, velocities, self.dt, **manoeuvres)
         raise RuntimeError(
             f"scenario {self.name}: no trajectory fitted inside [{low}, {high}]^2 in "
             f"{self.max_attempts} attempts; shorten n_steps or lower the speeds"
@@ -153,7 +166,7 @@ class NearlyConstantVelocityScenario(Scenario):
     acceleration_noise_std: float = 0.2
     reference_seed: int = 1
 
-    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
         n_legs = self.n_steps // self.leg_duration_range[0] + 1
         durations = rng.integers(self.leg_duration_range[0], self.leg_duration_range[1] + 1, n_legs)
         speeds = rng.uniform(*self.speed_range, n_legs)
@@ -171,7 +184,9 @@ class NearlyConstantVelocityScenario(Scenario):
         velocities = nominal[leg_of_step] + walk
         speed = np.linalg.norm(velocities, axis=1, keepdims=True)
         velocities *= np.clip(speed, *self.speed_range) / speed
-        return _integrate_positions(velocities, self.dt), velocities
+        new_leg = np.zeros(self.n_steps, dtype=bool)
+        new_leg[leg_start[1:]] = True
+        return _integrate_positions(velocities, self.dt), velocities, {"new_leg": new_leg}
 
 
 @dataclass(frozen=True)
@@ -192,7 +207,7 @@ class CoordinatedTurnScenario(Scenario):
     cv_duration_range: tuple[int, int] = (8, 20)
     reference_seed: int = 2
 
-    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
         period = self.cv_duration_range[0] + self.turn_duration
         n_legs = self.n_steps // period + 2
         cv_durations = rng.integers(
@@ -217,7 +232,7 @@ class CoordinatedTurnScenario(Scenario):
         )
         increments = np.where(turning[:, None], arc, straight)
         positions = np.vstack([np.zeros((1, 2)), np.cumsum(increments, axis=0)])
-        return positions, velocities
+        return positions, velocities, {"turn_rate": np.r_[0.0, rate_per_step]}
 
 
 @dataclass(frozen=True)
@@ -255,7 +270,7 @@ class SingerScenario(Scenario):
         )
         return float(np.sqrt(variance))
 
-    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def _unconstrained(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
         rho = np.exp(-self.dt / self.time_constant)
         sigma = self.acceleration_std
         min_speed, max_speed = self.speed_range
@@ -281,7 +296,7 @@ class SingerScenario(Scenario):
                 proposal *= max_speed / speed
             velocity = proposal
             velocities[k] = velocity
-        return _integrate_positions(velocities, self.dt), velocities
+        return _integrate_positions(velocities, self.dt), velocities, {}
 
 
 SCENARIOS: dict[str, Scenario] = {
