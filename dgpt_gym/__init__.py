@@ -54,3 +54,6 @@ register_tracker("gp-stgp", entry_point="baselines.standard_gp:StandardGP", inpu
 register_tracker("hybrid", entry_point="agents.hybrid:HybridFilter", variant="exact")
 register_tracker("hybrid-paper", entry_point="agents.hybrid:HybridFilter", variant="paper")
 register_tracker("cpf", entry_point="baselines.cpf:MultipleModelCPF")
+register_tracker("pda", entry_point="baselines.pda:PDAFilter")
+register_tracker("imm-pda", entry_point="baselines.pda:IMMPDAFilter")
+register_tracker("clairvoyant", entry_point="baselines.clairvoyant:ClairvoyantFilter")
