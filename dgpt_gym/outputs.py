@@ -6,7 +6,8 @@ writes, to the report folder, what the sweep's runs allow:
 | file | content | paper |
 |---|---|---|
 | ``results.md`` | headline against the paper, NRMSE per tracker and scenario, failures, timings, links | |
-| ``results_cells.csv`` | every cell's summary (means over runs, STD of RMSE) | |
+| ``results_cells.csv`` | every cell's summary (means over runs, STD of RMSE, ratio to the floor) | |
+| ``results_baselines.md`` | NRMSE against the standard trackers and the clairvoyant floor; NEES, coverage, track loss | |
 | ``results_tables.md`` (+ ``.csv``) | NRMSE beside the paper's, laid out like the paper | Tables II-IX |
 | ``results_hybrid.md``, ``figures/hybrid_comparison.png`` | NRMSE and STD of RMSE bars at sigma_z = 1, clutter 5 | Fig. 8 |
 | ``results_uncertainty.md``, ``figures/ucb_vs_ci.png`` | UCB and 3-sigma coverage and width; one S1 run | Figs. 4-7, Sec. VII-G |
@@ -21,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dgpt_gym import report
+from dgpt_gym import baseline_report, report
+from dgpt_gym.evaluation import add_floor_ratios
 from dgpt_gym.plots import plot_scenarios, plot_training_time, plot_ucb_vs_ci, read_training_time
 from dgpt_gym.sweep import PAPER_GP_TRACKERS, Grid, summarize_store, sweep_units
 
@@ -32,6 +34,28 @@ PAPER_UCB_GAIN = {"x": 88.0, "y": 42.0}
 
 TIME_COLUMNS = ("step_time_ms",)
 """Summary columns that are wall-clock measurements: they vary between identical runs."""
+
+
+def baselines_markdown(summaries: list[dict], command: str) -> str:
+    """``results_baselines.md``: every tracker against the standard trackers and the
+    clairvoyant floor, per noise level, and every tracker's consistency."""
+    parts = [
+        "## The paper's trackers against the standard trackers and the clairvoyant floor",
+        "",
+        f"Command: `{command}`. The clairvoyant filter is told which measurements are the"
+        " target's and uses the scenario's true motion model (baselines/clairvoyant.py): the"
+        " accuracy floor. pda and imm-pda are Kalman filters with probabilistic data"
+        " association (baselines/pda.py), tuned on training seeds (baseline_tuning.md).",
+        "",
+    ]
+    for noise in sorted({row["noise_std"] for row in summaries}):
+        parts.append(baseline_report.comparison_markdown(summaries, noise))
+    parts += [
+        "## Consistency: NEES, sigma coverage and track loss",
+        "",
+        baseline_report.consistency_markdown(summaries),
+    ]
+    return "\n".join(parts)
 
 
 def write_cells_csv(summaries: list[dict], path: Path) -> Path:
@@ -239,7 +263,12 @@ def write_outputs(
     written: list[Path] = []
     if not summaries:
         raise ValueError(f"the store at {out} holds no finished run of this sweep")
+    add_floor_ratios(summaries, floor=baseline_report.FLOOR)
     written.append(write_cells_csv(summaries, report_dir / "results_cells.csv"))
+
+    baselines = report_dir / "results_baselines.md"
+    baselines.write_text(baselines_markdown(summaries, command))
+    written.append(baselines)
 
     paper_rows = [row for row in summaries if row["tracker"] in PAPER_GP_TRACKERS]
     if paper_rows:

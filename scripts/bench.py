@@ -7,6 +7,8 @@
   2-3 experts, warm-started learning). Goal <= 0.5 ms.
 - cpf: median CPF step with 2000 particles and ~10 measurements (S3, clutter rate 5). Goal
   <= 1 ms.
+- standard: median step of the KF-PDA (``pda``, goal <= 0.2 ms), the IMM-PDA (``imm-pda``,
+  goal <= 0.5 ms) and the clairvoyant floor, one episode at a time (S3, clutter rate 5).
 - hybrid: median hybrid-filter step (exact and paper variants) over the median step of the
   DGPT it wraps, on the same episodes. Goal: at most 10 % over.
 - sklearn: full-GP log marginal likelihood + gradient versus scikit-learn's
@@ -39,7 +41,9 @@ from dgpt_gym.plots import plot_training_time
 from dgpt_gym.registry import make_tracker
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-SECTIONS = ["env", "dgpt-step", "cpf-hybrid", "lockstep", "sklearn", "training-time"]
+SECTIONS = [
+    "env", "dgpt-step", "cpf-hybrid", "standard", "lockstep", "sklearn", "training-time"
+]
 
 
 def step_cost(env: gym.Env, action, n_steps: int, seed: int = 0) -> float:
@@ -116,6 +120,15 @@ def bench_cpf_and_hybrid(episodes: int) -> dict:
         results[f"{variant} / DGPT-RBCM step (goal <= 1.10)"] = hybrid / dgpt
     results["DGPT-RBCM step, window 3 (ms)"] = dgpt
     return results
+
+
+def bench_standard(episodes: int) -> dict:
+    """Median steps of the standard trackers and the floor (S3, clutter rate 5)."""
+    return {
+        "KF-PDA step, median (ms, goal <= 0.2)": median_step_ms("pda", episodes),
+        "IMM-PDA step, median (ms, goal <= 0.5)": median_step_ms("imm-pda", episodes),
+        "clairvoyant step, median (ms)": median_step_ms("clairvoyant", episodes),
+    }
 
 
 def bench_lockstep(episodes: int) -> dict:
@@ -251,6 +264,10 @@ def main(argv: list[str] | None = None) -> int:
     if "cpf-hybrid" in args.only:
         print(f"\n## CPF and hybrid filter steps ({args.episodes} episodes of S3, clutter rate 5)")
         for key, value in bench_cpf_and_hybrid(args.episodes).items():
+            print(f"{key}: {value:.3f}")
+    if "standard" in args.only:
+        print(f"\n## standard trackers ({args.episodes} episodes of S3, clutter rate 5)")
+        for key, value in bench_standard(args.episodes).items():
             print(f"{key}: {value:.3f}")
     if "lockstep" in args.only:
         blocks = args.episodes * 5

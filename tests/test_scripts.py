@@ -1,5 +1,6 @@
 """The command-line scripts, run as a user runs them."""
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -34,12 +35,15 @@ def test_evaluate_prints_the_nrmse_table(tmp_path):
         "--no-progress",
     )
     assert result.returncode == 0, result.stderr
+    # | tracker | scenario | noise | clutter | NRMSE X ± ci | paper X | NRMSE Y ± ci | paper Y |
+    # RMSE ± ci | x floor | ANEES | 3 sigma | loss | runs |
     rows = re.findall(
-        r"^\| centroid \| (S\d) \| 1 \| 5 \| ([\d.]+) \| ([\d.]+) \| 2 \|$",
+        r"^\| centroid \| (S\d) \| 1 \| 5 \| ([\d.]+) ± [\d.]+ \| - \| ([\d.]+) ± [\d.]+ \| - \|"
+        r" [\d.]+ ± [\d.]+ \| - \| [\d.]+ \| [\d.]+ / [\d.]+ \| \d+ \| 2 \|$",
         result.stdout,
         flags=re.M,
     )
-    assert [row[0] for row in rows] == ["S1", "S4"]
+    assert [row[0] for row in rows] == ["S1", "S4"], result.stdout
     assert all(0 < float(value) < 100 for row in rows for value in row[1:])
     assert "0 failed runs" in result.stdout and (tmp_path / "results.md").exists()
 
@@ -51,9 +55,23 @@ def test_evaluate_help_documents_every_option():
         assert option in result.stdout
 
 
-def test_evaluate_stgp_inputs_need_a_variant():
-    result = run_script("evaluate.py", "--trackers", "cpf", "--inputs", "stgp")
-    assert result.returncode == 2 and "no STGP variant" in result.stderr
+def load_script(name):
+    spec = importlib.util.spec_from_file_location(name.removesuffix(".py"), ROOT / "scripts" / name)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_evaluate_inputs_expand_gp_trackers_and_keep_the_others():
+    with_inputs = load_script("evaluate.py").with_inputs
+    assert with_inputs(["gp", "imm-pda", "dgpt-rbcm-stgp"], ["tgp", "stgp"]) == [
+        "gp",
+        "gp-stgp",
+        "imm-pda",
+        "dgpt-rbcm",
+        "dgpt-rbcm-stgp",
+    ]
+    assert with_inputs(["cpf", "gp"], ["stgp"]) == ["cpf", "gp-stgp"]
 
 
 def test_evaluate_rejects_unknown_names_with_the_valid_ones():

@@ -1,0 +1,133 @@
+"""Tables of the paper's trackers against the field's standard trackers and the clairvoyant
+floor, and of every tracker's consistency (NEES, sigma coverage, track loss).
+
+Inputs are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store` with
+:func:`dgpt_gym.evaluation.add_floor_ratios` applied); metric names are those of
+:meth:`dgpt_gym.evaluation.EpisodeResult.metrics`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dgpt_gym.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
+
+__all__ = ["COMPARISON_TRACKERS", "FLOOR", "comparison_markdown", "consistency_markdown"]
+
+FLOOR = "clairvoyant"
+COMPARISON_TRACKERS = (
+    "clairvoyant",
+    "imm-pda",
+    "pda",
+    "dgpt-rbcm",
+    "dgpt-rbcm-stgp",
+    "dgpt-gpoe",
+    "gp",
+    "hybrid",
+    "hybrid-paper",
+    "cpf",
+)
+"""Row order of the comparison; trackers of the sweep not listed here follow."""
+
+
+def _value(row: dict, key: str) -> float:
+    value = row.get(key)
+    return float("nan") if value is None else float(value)
+
+
+def _ordered_trackers(summaries: list[dict]) -> list[str]:
+    present = list(dict.fromkeys(row["tracker"] for row in summaries))
+    return [t for t in COMPARISON_TRACKERS if t in present] + [
+        t for t in present if t not in COMPARISON_TRACKERS
+    ]
+
+
+def comparison_markdown(summaries: list[dict], noise_std: float = 1.0) -> str:
+    """Per tracker and (scenario, clutter rate) at ``noise_std``: mean NRMSE over both axes
+    (%, with the 95 % interval over runs), and the 2-D RMSE divided by the clairvoyant
+    floor's."""
+    rows = [row for row in summaries if row["noise_std"] == noise_std]
+    cells = sorted({(row["scenario"], row["clutter_rate"]) for row in rows})
+    by_key = {(row["tracker"], row["scenario"], row["clutter_rate"]): row for row in rows}
+    header = "| tracker | " + " | ".join(f"{s} c{c:g}" for s, c in cells) + " | mean |"
+    rule = "|---|" + "---|" * (len(cells) + 1)
+    nrmse_lines = [header, rule]
+    ratio_lines = [header, rule]
+    for tracker in _ordered_trackers(rows):
+        nrmse_cells, ratio_cells, nrmses, ratios = [], [], [], []
+        for scenario, clutter in cells:
+            row = by_key.get((tracker, scenario, clutter))
+            if row is None:
+                nrmse_cells.append("-")
+                ratio_cells.append("-")
+                continue
+            nrmse = 50 * (row["nrmse_x"] + row["nrmse_y"])
+            interval = 50 * (_value(row, "nrmse_x_ci95") + _value(row, "nrmse_y_ci95"))
+            nrmses.append(nrmse)
+            nrmse_cells.append(
+                f"{nrmse:.2f}" + ("" if math.isnan(interval) else f" ± {interval:.2f}")
+            )
+            ratio = _value(row, "rmse_ratio_to_floor")
+            ratios.append(ratio)
+            ratio_cells.append("-" if math.isnan(ratio) else f"{ratio:.2f}")
+        complete = len(nrmses) == len(cells)
+        nrmse_mean = f"{np.mean(nrmses):.2f}" if complete else "-"
+        finite = [r for r in ratios if not math.isnan(r)]
+        ratio_mean = f"{np.mean(finite):.2f}" if complete and len(finite) == len(cells) else "-"
+        nrmse_lines.append(f"| {tracker} | " + " | ".join(nrmse_cells) + f" | {nrmse_mean} |")
+        ratio_lines.append(f"| {tracker} | " + " | ".join(ratio_cells) + f" | {ratio_mean} |")
+    runs = sorted({int(row["n_runs"]) for row in rows})
+    return "\n".join(
+        [
+            f"### Mean NRMSE over both axes, %, sigma_z = {noise_std:g}"
+            f" ({', '.join(map(str, runs))} runs per cell; ± the 95 % interval over runs)",
+            "",
+            *nrmse_lines,
+            "",
+            f"### 2-D RMSE divided by the clairvoyant floor's, sigma_z = {noise_std:g}",
+            "",
+            *ratio_lines,
+            "",
+        ]
+    )
+
+
+def consistency_markdown(summaries: list[dict]) -> str:
+    """Per tracker, averaged over its cells: ANEES and median NEES (2-D), the per-axis
+    coverage of the 1, 2 and 3 sigma intervals, on steps where some sensor senses the
+    target and on coverage-gap steps, and the track-loss rate."""
+    nominal = (
+        f"nominal: ANEES {NOMINAL_ANEES:g}, median NEES {NOMINAL_MEDIAN_NEES:.2f}, coverage "
+        + " / ".join(f"{100 * NOMINAL_COVERAGE[k]:.1f}" for k in (1, 2, 3))
+        + " %"
+    )
+    lines = [
+        f"Means over each tracker's cells ({nominal}). Coverage X / Y: share of steps whose"
+        " estimate +- k sigma contains the true coordinate. Track loss: share of runs with at"
+        " least 10 consecutive steps of error above twice the sensing range.",
+        "",
+        "| tracker | steps | ANEES | median NEES | 1 sigma X / Y % | 2 sigma X / Y % | 3 sigma X / Y % | track loss % |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for tracker in _ordered_trackers(summaries):
+        mine = [row for row in summaries if row["tracker"] == tracker]
+        for part, suffix in (("detected", "_detected"), ("gap", "_gap")):
+
+            def mean(key: str, rows=mine, suffix=suffix) -> float:
+                values = [_value(row, key + suffix) for row in rows]
+                values = [v for v in values if not math.isnan(v)]
+                return float(np.mean(values)) if values else float("nan")
+
+            coverage = [
+                f"{100 * mean(f'coverage_{k}sigma_x'):.1f} / {100 * mean(f'coverage_{k}sigma_y'):.1f}"
+                for k in (1, 2, 3)
+            ]
+            loss = 100 * float(np.mean([_value(row, "track_loss_rate") for row in mine]))
+            lines.append(
+                f"| {tracker if part == 'detected' else ''} | {part} | {mean('anees'):.2f} | "
+                f"{mean('nees_median'):.2f} | " + " | ".join(coverage)
+                + f" | {f'{loss:.1f}' if part == 'detected' else ''} |"
+            )
+    return "\n".join(lines + [""])
