@@ -232,39 +232,50 @@ def multi_detection_update(
     anchor_cross = anchor_cov @ h.T
     support_cov = h @ anchor_cross + variance * eye  # the same for every anchor
     anchor_position = np.einsum("ij,...aj->...ai", h, anchor_mean)
-    offset = measurements[..., None, :, :] - anchor_position[..., :, None, :]
-    precision = inverse_2x2(support_cov)
-    quad = np.einsum("...aik,...kl,...ail->...ai", offset, precision, offset)
-    support_det = support_cov[..., 0, 0] * support_cov[..., 1, 1] - support_cov[..., 0, 1] ** 2
-    log_norm = -np.log(2.0 * np.pi) - 0.5 * np.log(support_det)
-    log_rho = log_ratio_scale + log_norm[..., None, None] - 0.5 * quad
-    not_self = ~np.eye(m, dtype=bool)
+    dx = measurements[:, 0] - anchor_position[..., :, None, 0]  # (..., m_anchor, m)
+    dy = measurements[:, 1] - anchor_position[..., :, None, 1]
+    a, b, d = (support_cov[..., i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    support_det = a * d - b * b
+    quad = (d * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / support_det
+    log_rho = log_ratio_scale - np.log(2.0 * np.pi) - 0.5 * np.log(support_det) - 0.5 * quad
     log_one_plus = np.logaddexp(0.0, log_rho)
-    log_support = np.where(not_self, log_one_plus, 0.0).sum(axis=-1)
-    beta = np.where(not_self, np.exp(log_rho - log_one_plus), 0.0)
+    log_one_plus[..., np.arange(m), np.arange(m)] = 0.0  # an anchor does not support itself
+    log_support = log_one_plus.sum(axis=-1)
+    beta = np.exp(log_rho - log_one_plus)
+    beta[..., np.arange(m), np.arange(m)] = 0.0
     # Refine each anchor with the beta-weighted other measurements: one update with their
-    # weighted mean and R / sum(beta) carries exactly their summed information.
+    # weighted mean and R / sum(beta) carries exactly their summed information. The anchors
+    # share P_a, so component j's covariance is P_a - P_a H^T S_j^-1 H P_a with
+    # S_j = H P_a H^T + R / total_j, and the mixture needs only sum_j w_j S_j^-1.
     total = np.maximum(beta.sum(axis=-1), 1e-12)  # (..., m)
-    weighted = np.einsum("...ai,ik->...ak", beta, measurements) / total[..., None]
-    refine_cov = support_cov[..., None, :, :] - variance * eye + (variance / total)[
-        ..., None, None
-    ] * eye  # H P_a H^T + R / total
-    refine_gain = anchor_cross[..., None, :, :] @ inverse_2x2(refine_cov)  # (..., m, n, 2)
-    refined_mean = anchor_mean + np.einsum(
-        "...aik,...ak->...ai", refine_gain, weighted - anchor_position
-    )
-    refined_cov = _symmetric(
-        anchor_cov[..., None, :, :] - refine_gain @ np.swapaxes(anchor_cross, -1, -2)[..., None, :, :]
-    )
+    weighted = (beta @ measurements) / total[..., None]
+    refine_inverse = inverse_2x2(
+        (support_cov - variance * eye)[..., None, :, :]
+        + (variance / total)[..., None, None] * eye
+    )  # (..., m, 2, 2)
+    correction = np.einsum("...akl,...al->...ak", refine_inverse, weighted - anchor_position)
+    refined_mean = anchor_mean + correction @ np.swapaxes(anchor_cross, -1, -2)
     log_weights = log_evidence + log_support + np.log1p(-miss_probability)
     if miss_probability > 0.0:
         log_weights = np.concatenate(
             [np.full(batch + (1,), np.log(miss_probability)), log_weights], axis=-1
         )
-        refined_mean = np.concatenate([mean[..., None, :], refined_mean], axis=-2)
-        refined_cov = np.concatenate([cov[..., None, :, :], refined_cov], axis=-3)
-    new_mean, new_cov = reduce_mixture(log_weights, refined_mean, refined_cov)
-    return new_mean, new_cov, np.logaddexp.reduce(log_weights, axis=-1)
+    weights = np.exp(log_weights - np.max(log_weights, axis=-1, keepdims=True))
+    weights /= weights.sum(axis=-1, keepdims=True)
+    anchor_weights = weights[..., -m:]
+    means = refined_mean
+    if miss_probability > 0.0:
+        means = np.concatenate([mean[..., None, :], refined_mean], axis=-2)
+    new_mean = np.einsum("...j,...ji->...i", weights, means)
+    spread = means - new_mean[..., None, :]
+    shrink = np.einsum("...a,...akl->...kl", anchor_weights, refine_inverse)
+    anchored = anchor_weights.sum(axis=-1)[..., None, None] * anchor_cov - anchor_cross @ shrink @ (
+        np.swapaxes(anchor_cross, -1, -2)
+    )
+    new_cov = anchored + np.einsum("...j,...jk,...jl->...kl", weights, spread, spread)
+    if miss_probability > 0.0:
+        new_cov = new_cov + weights[..., 0, None, None] * cov
+    return new_mean, _symmetric(new_cov), np.logaddexp.reduce(log_weights, axis=-1)
 
 
 def imm_mix(means, covs, mode_probabilities, mode_transition):

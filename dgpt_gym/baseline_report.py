@@ -12,19 +12,32 @@ import math
 
 import numpy as np
 
+from dgpt_gym.evaluation import interval_half_width
 from dgpt_gym.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
 
-__all__ = ["COMPARISON_TRACKERS", "FLOOR", "comparison_markdown", "consistency_markdown"]
+__all__ = [
+    "COMPARISON_TRACKERS",
+    "FLOOR",
+    "PAIRED_REFERENCE",
+    "comparison_markdown",
+    "consistency_markdown",
+    "paired_markdown",
+]
+
+PAIRED_REFERENCE = "dgpt-rbcm"
+"""The paper's main tracker, against which every other is compared seed by seed."""
 
 FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
     "clairvoyant",
     "imm-pda",
     "pda",
+    "gp",
+    "gp-stgp",
     "dgpt-rbcm",
     "dgpt-rbcm-stgp",
     "dgpt-gpoe",
-    "gp",
+    "dgpt-gpoe-stgp",
     "hybrid",
     "hybrid-paper",
     "cpf",
@@ -130,4 +143,41 @@ def consistency_markdown(summaries: list[dict]) -> str:
                 f"{mean('nees_median'):.2f} | " + " | ".join(coverage)
                 + f" | {f'{loss:.1f}' if part == 'detected' else ''} |"
             )
+    return "\n".join(lines + [""])
+
+
+def paired_markdown(
+    per_run: dict[tuple, dict[int, float]], noise_std: float = 1.0, reference: str = PAIRED_REFERENCE
+) -> str:
+    """Paired comparison with ``reference`` at ``noise_std``: per tracker and (scenario,
+    clutter rate), the mean over shared seeds of (tracker - reference) mean-over-axes NRMSE,
+    in percentage points, with the 95 % Student-t interval of that mean. ``per_run`` maps
+    (tracker, scenario, noise_std, clutter_rate) to {seed: NRMSE}."""
+    cells = sorted({(k[1], k[3]) for k in per_run if k[2] == noise_std})
+    trackers = _ordered_trackers(
+        [{"tracker": k[0]} for k in per_run if k[2] == noise_std and k[0] != reference]
+    )
+    lines = [
+        f"### Paired NRMSE difference to {reference}, percentage points, sigma_z = {noise_std:g}",
+        "",
+        f"Mean over the seeds both ran of (tracker - {reference}), ± its 95 % interval;"
+        " negative: more accurate than the paper's tracker. Bold: the interval excludes 0.",
+        "",
+        "| tracker | " + " | ".join(f"{s} c{c:g}" for s, c in cells) + " |",
+        "|---|" + "---|" * len(cells),
+    ]
+    for tracker in trackers:
+        row = []
+        for scenario, clutter in cells:
+            mine = per_run.get((tracker, scenario, noise_std, clutter), {})
+            theirs = per_run.get((reference, scenario, noise_std, clutter), {})
+            seeds = sorted(set(mine) & set(theirs))
+            if len(seeds) < 2:
+                row.append("-")
+                continue
+            differences = 100 * np.array([mine[s] - theirs[s] for s in seeds])
+            mean, half = float(np.mean(differences)), interval_half_width(differences)
+            text = f"{mean:+.2f} ± {half:.2f}"
+            row.append(f"**{text}**" if abs(mean) > half else text)
+        lines.append(f"| {tracker} | " + " | ".join(row) + " |")
     return "\n".join(lines + [""])

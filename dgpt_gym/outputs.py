@@ -25,6 +25,7 @@ import numpy as np
 from dgpt_gym import baseline_report, report
 from dgpt_gym.evaluation import add_floor_ratios
 from dgpt_gym.plots import plot_scenarios, plot_training_time, plot_ucb_vs_ci, read_training_time
+from dgpt_gym.store import ResultsStore
 from dgpt_gym.sweep import PAPER_GP_TRACKERS, Grid, summarize_store, sweep_units
 
 __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_UCB_GAIN"]
@@ -36,9 +37,27 @@ TIME_COLUMNS = ("step_time_ms",)
 """Summary columns that are wall-clock measurements: they vary between identical runs."""
 
 
-def baselines_markdown(summaries: list[dict], command: str) -> str:
+def per_run_nrmse(grids: list[Grid], out: str | Path) -> dict[tuple, dict[int, float]]:
+    """{(tracker, scenario, noise_std, clutter_rate): {seed: mean-over-axes NRMSE}} of the
+    sweep's finished runs in the store at ``out``."""
+    keys = {unit.key for unit in sweep_units(grids)}
+    per_run: dict[tuple, dict[int, float]] = {}
+    with ResultsStore(out) as store:
+        for row in store.rows(keys, status="ok"):
+            cell = (row["tracker"], row["scenario"], row["noise_std"], row["clutter_rate"])
+            metrics = row["metrics"]
+            per_run.setdefault(cell, {})[row["seed"]] = 0.5 * (
+                metrics["nrmse_x"] + metrics["nrmse_y"]
+            )
+    return per_run
+
+
+def baselines_markdown(
+    summaries: list[dict], command: str, per_run: dict[tuple, dict[int, float]] | None = None
+) -> str:
     """``results_baselines.md``: every tracker against the standard trackers and the
-    clairvoyant floor, per noise level, and every tracker's consistency."""
+    clairvoyant floor, per noise level (with the paired comparison to DGPT-RBCM when the
+    per-run values are given), and every tracker's consistency."""
     parts = [
         "## The paper's trackers against the standard trackers and the clairvoyant floor",
         "",
@@ -50,6 +69,8 @@ def baselines_markdown(summaries: list[dict], command: str) -> str:
     ]
     for noise in sorted({row["noise_std"] for row in summaries}):
         parts.append(baseline_report.comparison_markdown(summaries, noise))
+        if per_run:
+            parts.append(baseline_report.paired_markdown(per_run, noise))
     parts += [
         "## Consistency: NEES, sigma coverage and track loss",
         "",
@@ -267,7 +288,7 @@ def write_outputs(
     written.append(write_cells_csv(summaries, report_dir / "results_cells.csv"))
 
     baselines = report_dir / "results_baselines.md"
-    baselines.write_text(baselines_markdown(summaries, command))
+    baselines.write_text(baselines_markdown(summaries, command, per_run_nrmse(grids, out)))
     written.append(baselines)
 
     paper_rows = [row for row in summaries if row["tracker"] in PAPER_GP_TRACKERS]

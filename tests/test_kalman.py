@@ -1,6 +1,7 @@
 """baselines/kalman.py against dense, loop-by-loop references of the same formulas."""
 
 import numpy as np
+import pytest
 from scipy.stats import multivariate_normal
 
 from baselines.kalman import (
@@ -18,10 +19,15 @@ DETECTION_RATE = 1.0
 CLUTTER_DENSITY = 5.0 / (np.pi * 50.0**2)
 
 
-def anchored_mixture_by_loops(mean, cov, measurements):
+def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
     """The anchored Gaussian mixture of the multi_detection_update docstring, one anchor and
-    one measurement at a time, in information form, with explicit inverses."""
+    one measurement at a time, in information form, with explicit inverses; with a
+    missed-detection component (the prior, weight ``miss_probability``) when positive."""
     weights, means, covs = [], [], []
+    if miss_probability > 0:
+        weights.append(np.log(miss_probability))
+        means.append(mean)
+        covs.append(cov)
     for j, anchor in enumerate(measurements):
         innovation_cov = H @ cov @ H.T + R
         gain = cov @ H.T @ np.linalg.inv(innovation_cov)
@@ -48,7 +54,7 @@ def anchored_mixture_by_loops(mean, cov, measurements):
         refined_mean = refined_cov @ (
             np.linalg.inv(anchor_cov) @ anchor_mean + H.T @ np.linalg.inv(R) @ (beta @ measurements)
         )
-        weights.append(log_weight)
+        weights.append(log_weight + np.log1p(-miss_probability))
         means.append(refined_mean)
         covs.append(refined_cov)
     weights = np.array(weights)
@@ -72,14 +78,16 @@ def random_problem(rng, n_target=3, n_clutter=6):
     return mean, cov, rng.permutation(np.vstack([target, clutter]))
 
 
-def test_multi_detection_update_equals_the_anchor_by_anchor_reference():
+@pytest.mark.parametrize("miss_probability", [0.0, 0.14])
+def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_probability):
     rng = np.random.default_rng(3)
     for _ in range(5):
         mean, cov, measurements = random_problem(rng)
         got = multi_detection_update(
-            mean, cov, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+            mean, cov, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY,
+            miss_probability,
         )
-        expected = anchored_mixture_by_loops(mean, cov, measurements)
+        expected = anchored_mixture_by_loops(mean, cov, measurements, miss_probability)
         np.testing.assert_allclose(got[0], expected[0], rtol=1e-10, atol=1e-9)
         np.testing.assert_allclose(got[1], expected[1], rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(got[2], expected[2], rtol=1e-10)
