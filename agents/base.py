@@ -33,6 +33,12 @@ class Estimate:
     ucb: np.ndarray | None = None
     prior_next: tuple[np.ndarray, np.ndarray] | None = None
 
+    @classmethod
+    def uninformed(cls, spec: ProblemSpec) -> Estimate:
+        """The answer before any measurement: the area's centre, with the per-axis variance
+        of a position uniform over the area (area^2 / 12)."""
+        return cls(np.full(2, spec.area / 2.0), np.full(2, spec.area**2 / 12.0))
+
 
 @runtime_checkable
 class Tracker(Protocol):

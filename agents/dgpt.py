@@ -269,8 +269,7 @@ class DGPT(TrackerBase):
         recorded = bool(points.shape[0]) and self._record(step, points, sensors)
         data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
         if data is None:  # nothing seen yet in this episode
-            centre = np.full(2, self.spec_.area / 2.0)
-            return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+            return Estimate.uninformed(self.spec_)
         self.step_ = step
         return data, recorded and data.n_points >= 3
 

@@ -243,8 +243,7 @@ class ClairvoyantFilter(TrackerBase):
         measurements = np.asarray(obs["measurements"], dtype=float)[rows]
         if self.mean_ is None:
             if measurements.shape[0] == 0:
-                centre = np.full(2, self.spec_.area / 2.0)
-                return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+                return Estimate.uninformed(self.spec_)
             self._start(measurements)
         else:
             self._predict(truth)

@@ -241,8 +241,7 @@ class MultipleModelCPF(TrackerBase):
         measurements = np.asarray(obs["measurements"], dtype=float)[mask]
         if self.particles_ is None:
             if measurements.shape[0] == 0:
-                centre = np.full(2, self.spec_.area / 2.0)
-                return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+                return Estimate.uninformed(self.spec_)
             self._initialise(measurements)
         else:
             self._predict()

@@ -215,8 +215,7 @@ class IMMPDAFilter(TrackerBase):
         measurements = np.asarray(obs["measurements"], dtype=float)[mask]
         if self.means_ is None:
             if measurements.shape[0] == 0:
-                centre = np.full(2, self.spec_.area / 2.0)
-                return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+                return Estimate.uninformed(self.spec_)
             self._start(measurements)
             means, covs, predicted = self.means_, self.covs_, self.mode_probabilities_
         else:

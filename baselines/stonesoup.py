@@ -133,8 +133,7 @@ class StoneSoupTracker(TrackerBase):
         when = EPOCH + datetime.timedelta(seconds=float(obs["t"]) * self.spec_.dt)
         if self.track_ is None:
             if measurements.shape[0] == 0:
-                centre = np.full(2, self.spec_.area / 2.0)
-                return Estimate(centre, np.full(2, self.spec_.area**2 / 12.0))
+                return Estimate.uninformed(self.spec_)
             self._start(measurements, when)  # then updated with the same scan (dt = 0)
         model = self.updater_.measurement_model
         detections = {

@@ -14,6 +14,7 @@ import numpy as np
 
 from dgpt_gym.evaluation import interval_half_width
 from dgpt_gym.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
+from dgpt_gym.sweep import PAPER_GP_TRACKERS
 
 __all__ = [
     "COMPARISON_TRACKERS",
@@ -29,18 +30,7 @@ PAIRED_REFERENCE = "dgpt-rbcm"
 
 FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
-    "clairvoyant",
-    "imm-pda",
-    "pda",
-    "gp",
-    "gp-stgp",
-    "dgpt-rbcm",
-    "dgpt-rbcm-stgp",
-    "dgpt-gpoe",
-    "dgpt-gpoe-stgp",
-    "hybrid",
-    "hybrid-paper",
-    "cpf",
+    ("clairvoyant", "imm-pda", "pda") + PAPER_GP_TRACKERS + ("hybrid", "hybrid-paper", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
 

@@ -140,7 +140,8 @@ def run_episodes(
 
     Each step, the trackers of the episodes still running take their observations in one
     call of ``update_batch`` when their class has one (:meth:`agents.base.TrackerBase.update_batch`;
-    DGPT batches its learning and prediction over the episodes), else one ``update`` each.
+    DGPT batches its learning and prediction over the episodes), else one ``update`` each
+    (oracles always: they take ``truth=info`` too, see the module docstring).
     The results equal those of :func:`run_episode` on each episode alone; ``step_time`` is
     the batch's time per step divided by the number of episodes it stepped.
     """
@@ -159,24 +160,21 @@ def run_episodes(
         observations.append(observation)
         truths.append(info)
         records.append(_EpisodeRecord(sensing_range=info["problem_spec"].sensing_range))
-    update_batch = getattr(type(trackers[0]), "update_batch", None) if trackers else None
-    if update_batch is None or any(type(tracker) is not type(trackers[0]) for tracker in trackers):
-        update_batch = _update_each
-    if any(is_oracle(tracker) for tracker in trackers):
-        update_batch = _update_each
+    shared = type(trackers[0]) if trackers else None
+    batched = (
+        hasattr(shared, "update_batch")
+        and all(type(tracker) is shared for tracker in trackers)
+        and not is_oracle(trackers[0])
+    )
     running = list(range(len(envs)))
     while running:
         started = time.perf_counter()
-        if update_batch is _update_each:
-            estimates = _update_each(
-                [trackers[i] for i in running],
-                [observations[i] for i in running],
-                [truths[i] for i in running],
-            )
+        stepping = [trackers[i] for i in running]
+        current = [observations[i] for i in running]
+        if batched:
+            estimates = shared.update_batch(stepping, current)
         else:
-            estimates = update_batch(
-                [trackers[i] for i in running], [observations[i] for i in running]
-            )
+            estimates = _update_each(stepping, current, [truths[i] for i in running])
         elapsed = (time.perf_counter() - started) / len(running)
         still_running = []
         for index, estimate in zip(running, estimates):
