@@ -2,7 +2,8 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-# torch must come from the pinned CPU build before stable-baselines3 pulls in a CUDA one.
+# torch is pinned and installed before stable-baselines3, which would otherwise resolve the
+# newest release with its CUDA packages.
 TORCH := torch==2.13.0
 
 .PHONY: evaluate test bench lint clean

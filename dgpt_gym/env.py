@@ -211,7 +211,7 @@ class DGPTrackEnv(gym.Env):
 
     @property
     def problem_spec(self) -> ProblemSpec:
-        """What trackers may know: layout, sensing range, rates and noise (DESIGN.md)."""
+        """What trackers may know: layout, sensing range, rates and noise (docs/design.md)."""
         return ProblemSpec(
             sensor_positions=self.network.positions,
             sensing_range=self.sensing_range,

@@ -1,7 +1,7 @@
 """Target trajectories of the paper's four scenarios S1-S4 (Sec. VII-D, Fig. 3).
 
 The paper names each scenario's motion model but prints no parameters; the values below
-are this project's documented choices (see DESIGN.md, "Decisions"). Every scenario is a
+are this project's documented choices (docs/design.md, "Decisions"). Every scenario is a
 frozen dataclass whose fields are those parameters, and :meth:`Scenario.sample` draws a
 trajectory from a ``numpy.random.Generator``:
 
