@@ -237,3 +237,43 @@ def test_cpf_rejects_bad_arguments(kwargs, name):
 def test_hybrid_rejects_an_unknown_variant():
     with pytest.raises(ValueError, match="variant"):
         HybridFilter(variant="approximate")
+
+
+class RecordingHybrid(HybridFilter):
+    """Records the wrapped DGPT's own estimate at every step."""
+
+    def _posterior(self, obs, prior, learned):
+        self.learned_.append(learned.mean.copy())
+        return super()._posterior(obs, prior, learned)
+
+
+def test_hybrid_answers_with_the_dgpt_estimate_when_it_reacquires_after_a_gap():
+    """At the first step with measurements after steps without any, the exact hybrid returns
+    the wrapped DGPT's estimate (reacquire="dgpt"); with reacquire="none" it returns the
+    Poisson posterior of the extrapolated prior, which differs."""
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    for rule in ("dgpt", "none"):
+        tracker = RecordingHybrid(reacquire=rule, window=3)
+        tracker.learned_ = []
+        obs, info = env.reset(seed=0)
+        tracker.reset(info["problem_spec"], seed=0)
+        silent, reacquisitions = 0, 0
+        for step in range(env.unwrapped.n_steps):
+            estimate = tracker.update(obs)
+            if silent > 0 and obs["mask"].any() and step > 0:
+                reacquisitions += 1
+                same = np.array_equal(estimate.mean, tracker.learned_[-1])
+                assert same if rule == "dgpt" else not same
+            silent = 0 if obs["mask"].any() else silent + 1
+            obs, *_ = env.step(estimate.mean)
+        assert reacquisitions >= 2  # the episode re-acquires after gaps
+
+
+def test_paper_hybrid_warns_that_it_assumes_unit_detection_rate():
+    import agents.hybrid as hybrid
+
+    hybrid._paper_variant_warned = False
+    env = gym.make("DGPTrack-v0", scenario="S1", detection_rate=2.0)
+    _, info = env.reset(seed=0)
+    with pytest.warns(UserWarning, match="lambda_T = 1"):
+        make_tracker("hybrid-paper").reset(info["problem_spec"])
