@@ -49,12 +49,17 @@ from baselines.kalman import (
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.validation import check_choice, check_real
 
-__all__ = ["PDAFilter", "IMMPDAFilter", "ASSOCIATIONS", "REACQUIRE_PROBABILITY"]
+__all__ = ["PDAFilter", "IMMPDAFilter", "ASSOCIATIONS", "REACQUIRE_PROBABILITY", "MIN_NOISE_STD"]
 
 ASSOCIATIONS = ("multi", "single")
 REACQUIRE_PROBABILITY = 1.0 - 1e-9
 """Gate probability of the track-loss test: a scan none of whose measurements falls inside
 this chi-square(2) gate of any mode restarts the track."""
+
+
+MIN_NOISE_STD = 1e-3
+"""sigma_z floor, m: with noise-free measurements (noise_std = 0) the Kalman and PDA updates
+are singular; a millimetre keeps them defined and changes nothing measurable."""
 
 
 def coverage_gap_probability(spec: ProblemSpec) -> float:
@@ -152,7 +157,8 @@ class IMMPDAFilter(TrackerBase):
             noises.append(noise)
         self.transitions_ = np.stack(transitions)
         self.process_noises_ = np.stack(noises)
-        self.measurement_noise_ = spec.noise_std**2 * np.eye(2)
+        self.noise_std_ = max(spec.noise_std, MIN_NOISE_STD)
+        self.measurement_noise_ = self.noise_std_**2 * np.eye(2)
         self.clutter_density_ = spec.clutter_rate / spec.sensing_area
         self.miss_probability_ = (
             0.0 if spec.clutter_sensors == "detecting" else coverage_gap_probability(spec)
@@ -190,7 +196,7 @@ class IMMPDAFilter(TrackerBase):
                 covs,
                 measurements,
                 POSITION_MATRIX,
-                spec.noise_std,
+                self.noise_std_,
                 spec.detection_rate,
                 self.clutter_density_,
                 self.miss_probability_,
