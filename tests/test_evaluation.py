@@ -145,3 +145,35 @@ def test_coasting_through_empty_steps_grows_the_variance():
     variances = [tracker.update(empty).var for _ in range(30)]
     assert np.all(np.diff(np.array(variances), axis=0) > 0)
     assert np.all(np.isfinite(variances)) and np.all(variances[0] > first.var)
+
+
+def test_installed_packages_register_trackers_through_entry_points(monkeypatch):
+    import importlib.metadata
+
+    from dgpt_gym import registry
+
+    point = importlib.metadata.EntryPoint(
+        name="their-centroid",
+        value="baselines.centroid:GatedCentroidTracker",
+        group=registry.ENTRY_POINT_GROUP,
+    )
+    monkeypatch.setattr(
+        importlib.metadata,
+        "entry_points",
+        lambda group=None: [point] if group == registry.ENTRY_POINT_GROUP else [],
+    )
+    monkeypatch.setattr(registry, "_entry_points_loaded", False)
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # leave no trace
+    assert "their-centroid" in tracker_ids()
+    assert isinstance(make_tracker("their-centroid"), GatedCentroidTracker)
+
+
+def test_a_class_path_is_a_tracker_id(monkeypatch):
+    from dgpt_gym import registry
+
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # leave no trace
+    tracker = make_tracker("baselines.centroid:GatedCentroidTracker")
+    assert isinstance(tracker, GatedCentroidTracker)
+    assert "baselines.centroid:GatedCentroidTracker" in tracker_ids()
+    with pytest.raises(ValueError, match="names no importable class"):
+        make_tracker("baselines.centroid:NoSuchTracker")

@@ -1,6 +1,7 @@
 """The command-line scripts, run as a user runs them."""
 
 import importlib.util
+import os
 import re
 import subprocess
 import sys
@@ -9,12 +10,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run_script(name, *args):
+def run_script(name, *args, env=None):
     return subprocess.run(
         [sys.executable, str(ROOT / "scripts" / name), *args],
         capture_output=True,
         text=True,
         timeout=300,
+        env=env,
     )
 
 
@@ -122,3 +124,26 @@ def test_train_rl_rejects_bad_choices():
     assert result.returncode == 2 and "window" in result.stderr
     result = run_script("train_rl.py", "--env", "gating", "--algo", "dqn", "--timesteps", "8")
     assert result.returncode == 2 and "Discrete" in result.stderr
+
+
+USER_TRACKER = """
+from baselines.centroid import GatedCentroidTracker
+
+
+class MyTracker(GatedCentroidTracker):
+    name = "my-tracker"
+"""
+
+
+def test_evaluate_runs_a_user_tracker_named_by_its_class(tmp_path):
+    (tmp_path / "my_trackers.py").write_text(USER_TRACKER)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    args = ("--out", str(tmp_path / "out"), "--scenarios", "S1", "--clutter-rates", "1")
+    result = run_script(
+        "evaluate.py", "--trackers", "my_trackers:MyTracker", *args, "--runs", "2",
+        "--no-progress", env=env,
+    )
+    assert result.returncode == 0, result.stderr
+    assert re.search(r"^\| my_trackers:MyTracker \| S1 \| 1 \| 1 \| [\d.]+ ± ", result.stdout, re.M)
+    missing = run_script("evaluate.py", "--trackers", "my_trackers:Nothing", *args, env=env)
+    assert missing.returncode == 2 and "names no importable class" in missing.stderr
