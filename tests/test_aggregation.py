@@ -141,3 +141,18 @@ def test_ucb_covers_functions_drawn_from_the_prior(method):
 def test_unknown_method():
     with pytest.raises(ValueError, match="aggregation must be one of"):
         agg.aggregate("moe", np.zeros(2), np.ones(2), 1.0)
+
+
+def test_anytime_ucb_by_hand():
+    """Lemma 2 at step t: gamma = 2 log(pi^2 t^2 M / (6 delta)); one expert of variance 0.5 at
+    t = 7 with delta = 0.01 gives sqrt(2 log(49 pi^2 / 0.06) x 0.5), and the bound grows with t
+    only through log t."""
+    delta, var = 0.01, np.array([0.5])
+    for step in (1, 7, 150):
+        gamma = 2 * np.log(np.pi**2 * step**2 / (6 * delta))
+        assert agg.ucb_half_width("rbcm", var, 4.0, delta, step=step) == pytest.approx(
+            np.sqrt(gamma * 0.5), rel=1e-12
+        )
+    # two experts: delta is split, M = 2 enters the logarithm
+    two = agg.ucb_half_width("poe", np.array([1.0, 1.0]), 4.0, delta, step=3)
+    assert two == pytest.approx(np.sqrt(2 * np.log(np.pi**2 * 9 * 2 / (6 * delta))), rel=1e-12)

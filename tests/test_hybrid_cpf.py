@@ -277,3 +277,39 @@ def test_paper_hybrid_warns_that_it_assumes_unit_detection_rate():
     _, info = env.reset(seed=0)
     with pytest.warns(UserWarning, match="lambda_T = 1"):
         make_tracker("hybrid-paper").reset(info["problem_spec"])
+
+
+class PriorRecordingHybrid(HybridFilter):
+    """Records the prior and the measurements of every step's Poisson update."""
+
+    def _posterior(self, obs, prior, learned):
+        mask = np.asarray(obs["mask"]).astype(bool)
+        self.seen_.append((prior, np.asarray(obs["measurements"])[mask].copy(), self.silent_steps_))
+        return super()._posterior(obs, prior, learned)
+
+
+def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound():
+    """At every step after the first (and not re-acquiring after a gap), the exact hybrid's
+    estimate is the posterior of the DGPT's prior under eq. (42) (computed here directly),
+    and its bound is Lemma 1's (2 log(1 / delta))^(1/2) sigma on that posterior."""
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    tracker = PriorRecordingHybrid(window=3, delta=0.003)
+    tracker.seen_ = []
+    obs, info = env.reset(seed=2)
+    tracker.reset(info["problem_spec"], seed=2)
+    likelihood = PoissonLikelihood.from_spec(info["problem_spec"])
+    moved = 0
+    for _ in range(60):
+        estimate = tracker.update(obs)
+        prior, measurements, silent_before = tracker.seen_[-1]
+        if prior is not None and not (silent_before and len(measurements)):
+            expected = exact_posterior(prior[0], prior[1], measurements, likelihood)
+            np.testing.assert_array_equal(estimate.mean, expected.mean)
+            np.testing.assert_array_equal(estimate.var, expected.var)
+            # Lemma 1 with delta = 0.003: 2 log(1 / 0.003) = 11.62
+            np.testing.assert_allclose(
+                estimate.ucb, np.sqrt(2 * np.log(1 / 0.003) * expected.var), rtol=1e-12
+            )
+            moved += len(measurements) > 0 and not np.allclose(estimate.mean, prior[0])
+        obs, *_ = env.step(estimate.mean)
+    assert moved > 20  # the update moved the prior on most steps with measurements
