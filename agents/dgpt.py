@@ -42,7 +42,7 @@ from agents.base import Estimate, TrackerBase
 from agents.gating import gate_measurements
 from agents.window import PRIOR_MEANS, ExpertData, SlidingWindow, StepRecord, padded_size
 from dgpt_gym.problem import ProblemSpec
-from dgpt_gym.validation import check_choice, check_integer, check_real
+from dgpt_gym.validation import check_bool, check_choice, check_integer, check_real
 
 __all__ = [
     "DGPT",
@@ -128,8 +128,8 @@ class DGPT(TrackerBase):
         )
         self.mean = check_choice("mean", mean, PRIOR_MEANS)
         self.max_iterations = check_integer("max_iterations", max_iterations, low=1)
-        self.anytime_ucb = bool(anytime_ucb)
-        self.gating = bool(gating)
+        self.anytime_ucb = check_bool("anytime_ucb", anytime_ucb)
+        self.gating = check_bool("gating", gating)
         self.gate_threshold = (
             None
             if gate_threshold is None

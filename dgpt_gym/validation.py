@@ -7,7 +7,9 @@ import math
 import numbers
 from collections.abc import Collection
 
-__all__ = ["check_real", "check_integer", "check_choice"]
+import numpy as np
+
+__all__ = ["check_real", "check_integer", "check_choice", "check_bool"]
 
 
 def check_real(
@@ -52,3 +54,11 @@ def check_choice(name: str, value: object, allowed: Collection) -> object:
     if not ok:
         raise ValueError(f"{name} must be one of {sorted(allowed, key=str)}; got {value!r}")
     return value
+
+
+def check_bool(name: str, value: object) -> bool:
+    """``value`` if it is a bool (numpy's included), or ``ValueError``: a string such as
+    ``"false"`` would otherwise silently count as True."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise ValueError(f"{name} must be True or False; got {value!r}")

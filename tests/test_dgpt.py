@@ -175,3 +175,11 @@ def test_padded_sizes(size, padded):
     from agents.window import padded_size
 
     assert padded_size(size) == padded
+
+
+@pytest.mark.parametrize("name", ["gating", "anytime_ucb"])
+@pytest.mark.parametrize("value", ["false", "no", 0, 1, None])
+def test_boolean_arguments_refuse_non_booleans(name, value):
+    """A string such as "false" would otherwise count as True."""
+    with pytest.raises(ValueError, match=name):
+        DGPT(**{name: value})
