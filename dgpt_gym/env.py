@@ -23,6 +23,8 @@ __all__ = ["DGPTrackEnv", "TRAJECTORY_MODES", "OVERFLOW_PROBABILITY"]
 logger = logging.getLogger(__name__)
 
 TRAJECTORY_MODES = ("fixed", "random")
+RESET_OPTIONS = ("layout_seed",)
+"""The keys ``reset(options=...)`` accepts."""
 OVERFLOW_PROBABILITY = 1e-9
 """Per-step probability bound on more measurements than the observation holds."""
 
@@ -47,8 +49,8 @@ class DGPTrackEnv(gym.Env):
 
     ``Box(-area, 2 * area, shape=(2,), float64)``: the estimate (x, y) of the target position
     at the step of the last observation, in metres. The bounds are generous; finite actions
-    outside them are accepted and simply scored. A non-finite action or one that does not
-    have two elements raises ``ValueError``.
+    outside them are accepted and simply scored. An action that is not two finite real
+    numbers (non-finite, bool, complex, strings, another shape) raises ``ValueError``.
 
     ## Observation Space
 
@@ -78,7 +80,8 @@ class DGPTrackEnv(gym.Env):
     runs share it and differ in measurements and clutter), with ``"random"`` a fresh draw
     from the scenario's model. ``reset`` returns the measurements of step 0. The sensor
     layout comes from ``layout_seed`` and stays the same across episodes unless
-    ``reset(options={"layout_seed": s})`` gives another.
+    ``reset(options={"layout_seed": s})`` gives another (the one option; others raise
+    ``ValueError``).
 
     ## Episode End
 
@@ -228,7 +231,15 @@ class DGPTrackEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = options or {}
+        if options is None:
+            options = {}
+        if not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None; got {options!r}")
+        unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)
+        if unknown:
+            raise ValueError(
+                f"options has unknown keys {unknown}; allowed: {list(RESET_OPTIONS)}"
+            )
         if "layout_seed" in options:
             layout_seed = check_integer("options['layout_seed']", options["layout_seed"], low=0)
             if layout_seed != self.layout_seed:
@@ -267,7 +278,12 @@ class DGPTrackEnv(gym.Env):
             raise ResetNeeded(
                 "The episode has ended (truncated); call env.reset() before env.step()"
             )
-        estimate = np.asarray(action, dtype=np.float64)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "iuf":  # bool, complex, strings and objects would cast silently
+            raise ValueError(
+                f"action must be a finite real position estimate of shape (2,); got {action!r}"
+            )
+        estimate = raw.astype(np.float64)
         if estimate.shape != (2,) or not (
             math.isfinite(estimate[0]) and math.isfinite(estimate[1])
         ):

@@ -260,3 +260,21 @@ def test_make_vec_runs_four_envs():
         observations, rewards, terminated, truncated, _ = envs.step(np.full((4, 2), 500.0))
     assert rewards.shape == (4,) and np.all(rewards < 0)
     envs.close()
+
+
+@pytest.mark.parametrize(
+    "action",
+    [np.array([True, False]), np.array([1 + 2j, 3.0]), ["1", "2"], "12", np.array([None, 1.0])],
+)
+def test_actions_that_are_not_real_numbers_are_refused(action):
+    env = gym.make("DGPTrack-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        env.step(action)
+
+
+@pytest.mark.parametrize("options", [{"layout": 3}, {"layout_seed": 1, "seed": 2}, [1], "x"])
+def test_reset_options_are_checked(options):
+    env = gym.make("DGPTrack-v0").unwrapped
+    with pytest.raises(ValueError, match="options"):
+        env.reset(seed=0, options=options)
