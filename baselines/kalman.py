@@ -201,7 +201,10 @@ def multi_detection_update(
     target's: one Kalman update with their mean and R / m.
 
     Returns the posterior mean and covariance and the log-likelihood of the scan relative
-    to the all-clutter hypothesis (the IMM mode likelihood).
+    to the all-clutter hypothesis (the IMM mode likelihood): sum_j w_j / (1 + sum_i beta_ji),
+    since anchor j's weight stands for the subsets that contain z_j, each of which the sum
+    over anchors meets once per member. (The posterior needs no such correction to first
+    order: the anchors of one subset give nearly the same component.)
     """
     measurements = np.asarray(measurements, dtype=float).reshape(-1, 2)
     m = measurements.shape[0]
@@ -275,7 +278,12 @@ def multi_detection_update(
     new_cov = anchored + np.einsum("...j,...jk,...jl->...kl", weights, spread, spread)
     if miss_probability > 0.0:
         new_cov = new_cov + weights[..., 0, None, None] * cov
-    return new_mean, _symmetric(new_cov), np.logaddexp.reduce(log_weights, axis=-1)
+    # The scan likelihood relative to all clutter sums each subset of target measurements
+    # once, but the anchors count a subset of size k once per member: divide each anchor's
+    # weight by the expected size of its subset, 1 + sum_i beta_ji.
+    log_likelihood_terms = log_weights.copy()
+    log_likelihood_terms[..., -m:] -= np.log1p(beta.sum(axis=-1))
+    return new_mean, _symmetric(new_cov), np.logaddexp.reduce(log_likelihood_terms, axis=-1)
 
 
 def imm_mix(means, covs, mode_probabilities, mode_transition):

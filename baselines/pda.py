@@ -112,9 +112,15 @@ class IMMPDAFilter(TrackerBase):
                 "turn_rates and noise_diff_coeffs must be 1-D of the same length; got "
                 f"{self.turn_rates.tolist()} and {self.noise_diff_coeffs.tolist()}"
             )
-        if not (np.all(np.isfinite(self.turn_rates)) and np.all(self.noise_diff_coeffs >= 0)):
+        if self.turn_rates.size == 0:
+            raise ValueError("turn_rates and noise_diff_coeffs must name at least one mode; got []")
+        if not (
+            np.all(np.isfinite(self.turn_rates))
+            and np.all(np.isfinite(self.noise_diff_coeffs))
+            and np.all(self.noise_diff_coeffs >= 0)
+        ):
             raise ValueError(
-                "turn_rates must be finite and noise_diff_coeffs non-negative; got "
+                "turn_rates must be finite and noise_diff_coeffs finite and non-negative; got "
                 f"{self.turn_rates.tolist()} and {self.noise_diff_coeffs.tolist()}"
             )
         n_modes = self.turn_rates.size

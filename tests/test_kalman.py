@@ -22,9 +22,11 @@ CLUTTER_DENSITY = 5.0 / (np.pi * 50.0**2)
 def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
     """The anchored Gaussian mixture of the multi_detection_update docstring, one anchor and
     one measurement at a time, in information form, with explicit inverses; with a
-    missed-detection component (the prior, weight ``miss_probability``) when positive."""
-    weights, means, covs = [], [], []
+    missed-detection component (the prior, weight ``miss_probability``) when positive. Also
+    the scan's log-likelihood ratio, each anchor's weight divided by 1 + sum_i beta_i."""
+    weights, means, covs, sizes = [], [], [], []
     if miss_probability > 0:
+        sizes.append(1.0)
         weights.append(np.log(miss_probability))
         means.append(mean)
         covs.append(cov)
@@ -55,6 +57,7 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
             np.linalg.inv(anchor_cov) @ anchor_mean + H.T @ np.linalg.inv(R) @ (beta @ measurements)
         )
         weights.append(log_weight + np.log1p(-miss_probability))
+        sizes.append(1.0 + beta.sum())
         means.append(refined_mean)
         covs.append(refined_cov)
     weights = np.array(weights)
@@ -66,7 +69,9 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
         w * (c + np.outer(m - mixture_mean, m - mixture_mean))
         for w, m, c in zip(normalised, means, covs)
     )
-    return mixture_mean, mixture_cov, np.logaddexp.reduce(weights)
+    # the scan likelihood counts each subset once: each anchor's weight over the expected
+    # size of its subset
+    return mixture_mean, mixture_cov, np.logaddexp.reduce(weights - np.log(sizes))
 
 
 def random_problem(rng, n_target=3, n_clutter=6):
