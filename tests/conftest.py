@@ -6,6 +6,19 @@ import pytest
 import dgpt_gym  # noqa: F401  (registers DGPTrack-v0 and the trackers)
 
 
+def mixture_moments(log_weights, means, covs):
+    """Mean and covariance of a Gaussian mixture, component by component (a reference for
+    the vectorized reductions): weights normalised from their logs, covariance
+    sum_j w_j (P_j + (m_j - mean)(m_j - mean)^T)."""
+    log_weights = np.asarray(log_weights, dtype=float)
+    weights = np.exp(log_weights - log_weights.max())
+    weights /= weights.sum()
+    means = np.asarray(means)
+    mean = weights @ means
+    cov = sum(w * (c + np.outer(m - mean, m - mean)) for w, m, c in zip(weights, means, covs))
+    return mean, cov
+
+
 def z_tolerance(standard_error: float, z: float = 5.0) -> float:
     """A test tolerance of ``z`` standard errors (5: a false alarm below 1e-6 per check)."""
     return z * standard_error

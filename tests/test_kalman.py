@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import mixture_moments
 from scipy.stats import multivariate_normal
 
 from baselines.kalman import (
@@ -61,14 +62,7 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
         means.append(refined_mean)
         covs.append(refined_cov)
     weights = np.array(weights)
-    normalised = np.exp(weights - weights.max())
-    normalised /= normalised.sum()
-    means = np.array(means)
-    mixture_mean = normalised @ means
-    mixture_cov = sum(
-        w * (c + np.outer(m - mixture_mean, m - mixture_mean))
-        for w, m, c in zip(normalised, means, covs)
-    )
+    mixture_mean, mixture_cov = mixture_moments(weights, means, covs)
     # the scan likelihood counts each subset once: each anchor's weight over the expected
     # size of its subset
     return mixture_mean, mixture_cov, np.logaddexp.reduce(weights - np.log(sizes))

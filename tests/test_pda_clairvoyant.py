@@ -12,7 +12,7 @@ import itertools
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import z_tolerance
+from conftest import mixture_moments, z_tolerance
 from scipy.stats import multivariate_normal
 
 from baselines.centroid import GatedCentroidTracker
@@ -272,14 +272,7 @@ def exact_scan_posterior(mean, cov, points, noise_std, detection_rate, clutter_d
                 + multivariate_normal(h_s @ mean, s).logpdf(z_s)
             )
     log_weights = np.array(log_weights)
-    weights = np.exp(log_weights - log_weights.max())
-    weights /= weights.sum()
-    means = np.array(means)
-    posterior_mean = weights @ means
-    posterior_cov = sum(
-        w * (c + np.outer(x - posterior_mean, x - posterior_mean))
-        for w, x, c in zip(weights, means, covs)
-    )
+    posterior_mean, posterior_cov = mixture_moments(log_weights, means, covs)
     log_ratio = np.logaddexp.reduce(log_weights) - m * np.log(clutter_density)
     return posterior_mean, posterior_cov, log_ratio
 
