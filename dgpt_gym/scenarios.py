@@ -318,7 +318,7 @@ def get_scenario(name: str) -> Scenario:
 
 
 def scenario_table_markdown() -> str:
-    """Markdown table of every scenario's parameters (the README quotes it verbatim).
+    """Markdown table of every scenario's parameters (docs/usage.md quotes it verbatim).
 
     The fields shared by all scenarios (``dt``, ``area``, ``boundary_margin``,
     ``max_attempts``) are left out: they are the same for all and follow the env.

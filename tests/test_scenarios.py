@@ -114,10 +114,10 @@ def test_impossible_scenario_raises_instead_of_looping():
         too_long.sample(np.random.default_rng(0))
 
 
-def test_readme_quotes_the_current_scenario_parameters():
+def test_the_usage_guide_quotes_the_current_scenario_parameters():
     from pathlib import Path
 
     from dgpt_gym.scenarios import scenario_table_markdown
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    assert scenario_table_markdown() in readme
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "usage.md").read_text()
+    assert scenario_table_markdown() in guide
