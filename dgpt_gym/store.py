@@ -58,12 +58,24 @@ class ResultsStore:
     """
 
     def __init__(self, folder: str | Path) -> None:
-        self.path = Path(folder) / DATABASE_NAME
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._connection = sqlite3.connect(self.path)
-        self._connection.execute("PRAGMA journal_mode=WAL")
-        self._connection.execute(_SCHEMA)
-        self._connection.commit()
+        folder = Path(folder)
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"out must be a folder; {str(folder)!r} is a file")
+        self.path = folder / DATABASE_NAME
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise ValueError(f"out {str(folder)!r} cannot be created: {error.strerror}") from None
+        try:
+            self._connection = sqlite3.connect(self.path)
+            self._connection.execute("PRAGMA journal_mode=WAL")
+            self._connection.execute(_SCHEMA)
+            self._connection.commit()
+        except sqlite3.DatabaseError as error:
+            raise ValueError(
+                f"{self.path} is not a usable dgpt-gym results database ({error}); move or "
+                "delete it to start afresh, or give another --out"
+            ) from None
 
     def close(self) -> None:
         self._connection.close()

@@ -235,9 +235,12 @@ def main(argv: list[str] | None = None) -> int:
                 progress=not args.no_progress,
                 batch_size=args.batch_size,
             )
-        except ValueError as error:  # a bad --workers or --batch-size
+        except ValueError as error:  # a bad --workers, --batch-size or --out
             print(f"error: {error}", file=sys.stderr)
             return 2
+        except OSError as error:  # the store's folder is read-only or full
+            print(f"error: cannot write to {out}: {error}", file=sys.stderr)
+            return 1
         except ImportError as error:  # --scheduler without the cluster extra
             print(f"error: {error}", file=sys.stderr)
             return 2
@@ -260,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
+        return 1
+    except OSError as error:  # the report folder is read-only or full
+        print(f"error: cannot write the outputs to {args.report_dir or out}: {error}", file=sys.stderr)
         return 1
     summaries, failures = summarize_store(grids, out)
     print(format_summary_table(add_floor_ratios(summaries)))

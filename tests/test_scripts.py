@@ -147,3 +147,18 @@ def test_evaluate_runs_a_user_tracker_named_by_its_class(tmp_path):
     assert re.search(r"^\| my_trackers:MyTracker \| S1 \| 1 \| 1 \| [\d.]+ ± ", result.stdout, re.M)
     missing = run_script("evaluate.py", "--trackers", "my_trackers:Nothing", *args, env=env)
     assert missing.returncode == 2 and "names no importable class" in missing.stderr
+
+
+def test_evaluate_explains_a_bad_output_folder(tmp_path):
+    args = ("--trackers", "centroid", "--scenarios", "S1", "--runs", "1", "--no-progress")
+    a_file = tmp_path / "file"
+    a_file.write_text("not a folder")
+    result = run_script("evaluate.py", "--out", str(a_file), *args)
+    assert result.returncode == 2 and "out must be a folder" in result.stderr
+    assert "Traceback" not in result.stderr
+    corrupt = tmp_path / "corrupt"
+    corrupt.mkdir()
+    (corrupt / "results.sqlite").write_text("this is not an SQLite database" * 100)
+    result = run_script("evaluate.py", "--out", str(corrupt), *args)
+    assert result.returncode == 2 and "not a usable dgpt-gym results database" in result.stderr
+    assert "results.sqlite" in result.stderr and "Traceback" not in result.stderr
