@@ -269,8 +269,8 @@ def interval_half_width(values) -> float:
 def summarize_runs(rows: list[dict[str, float]]) -> dict[str, float]:
     """Mean of every metric over runs (NaN ignored), the STD of the RMSE over runs
     (``rmse_std_*``), the 95 % interval half-widths of :data:`INTERVAL_KEYS`
-    (``<key>_ci95``), the track-loss rate (share of runs that lost the track) and
-    ``n_runs``."""
+    (``<key>_ci95``; NaN for a single run, whose spread cannot be estimated), the
+    track-loss rate (``track_loss_rate``, share of runs that lost the track) and ``n_runs``."""
     keys = [key for key in rows[0] if key != "seed"]
     with warnings.catch_warnings():  # a metric NaN in every run (no UCB) stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 from conftest import z_tolerance
@@ -105,12 +107,13 @@ def episode_with_error(errors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_track_loss_needs_ten_consecutive_steps_above_the_threshold():
-    errors = np.full(40, 5.0)
+    errors = np.full(50, 5.0)
     errors[3:12] = 150.0  # 9 steps: not a loss
     errors[20:30] = 150.0  # 10 steps: a loss, exactly these steps
-    errors[32:40] = 100.0  # at the threshold: not above it
+    # 15 steps exactly at the threshold: long enough, but not above it, so not lost
+    errors[35:50] = 100.0
     lost = metrics.track_loss(*episode_with_error(errors), threshold=100.0)
-    expected = np.zeros(40, dtype=bool)
+    expected = np.zeros(50, dtype=bool)
     expected[20:30] = True
     np.testing.assert_array_equal(lost, expected)
     # a run that lasts to the end of the episode counts too
@@ -160,7 +163,10 @@ def test_episode_metrics_split_detected_and_gap_steps():
         n_measurements=np.full(n, 2),
         n_detecting=np.ones(n, dtype=int),
     )
-    assert np.isnan(always.metrics()["anees_gap"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gap_values = {key: value for key, value in always.metrics().items() if key.endswith("_gap")}
+    assert len(gap_values) == 9 and all(np.isnan(value) for value in gap_values.values())
 
 
 def test_summarize_runs_intervals_and_floor_ratios():
@@ -170,10 +176,16 @@ def test_summarize_runs_intervals_and_floor_ratios():
         for s, x, r, lost in ((0, 0.01, 2.0, 0.0), (1, 0.02, 4.0, 1.0), (2, 0.03, 9.0, 0.0))
     ]
     summary = summarize_runs(rows)
-    # three runs: t(0.975, 2) = 4.303, std of (0.01, 0.02, 0.03) = 0.01
-    assert summary["nrmse_x_ci95"] == pytest.approx(4.302653 * 0.01 / np.sqrt(3), rel=1e-6)
+    # three runs, so 2 degrees of freedom: t(0.975, 2) = 4.3027
+    quantile = stats.t.ppf(0.975, 2)
+    # nrmse_x (0.01, 0.02, 0.03): mean 0.02, squared deviations 1e-4 + 0 + 1e-4, / 2 -> std 0.01
+    assert summary["nrmse_x_ci95"] == pytest.approx(quantile * 0.01 / np.sqrt(3), rel=1e-9)
+    # rmse_2d (2, 4, 9): mean 5, squared deviations 9 + 1 + 16 = 26, / 2 -> std sqrt(13)
+    assert summary["rmse_2d_ci95"] == pytest.approx(quantile * np.sqrt(13 / 3), rel=1e-9)
     assert summary["nrmse_y_ci95"] == pytest.approx(0.0, abs=1e-15)
     assert summary["track_loss_rate"] == pytest.approx(1 / 3) and summary["n_runs"] == 3
+    # one run has no spread to estimate: the interval is NaN
+    assert np.isnan(summarize_runs(rows[:1])["nrmse_x_ci95"])
     cells = [
         {"tracker": "clairvoyant", "scenario": "S1", "noise_std": 1.0, "clutter_rate": 1.0,
          "rmse_2d": 2.0},
