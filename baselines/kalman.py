@@ -250,7 +250,8 @@ def multi_detection_update(
     # weighted mean and R / sum(beta) carries exactly their summed information. The anchors
     # share P_a, so component j's covariance is P_a - P_a H^T S_j^-1 H P_a with
     # S_j = H P_a H^T + R / total_j, and the mixture needs only sum_j w_j S_j^-1.
-    total = np.maximum(beta.sum(axis=-1), 1e-12)  # (..., m)
+    expected_others = beta.sum(axis=-1)  # (..., m): expected target points besides the anchor
+    total = np.maximum(expected_others, 1e-12)
     weighted = (beta @ measurements) / total[..., None]
     refine_inverse = inverse_2x2(
         (support_cov - variance * eye)[..., None, :, :]
@@ -282,7 +283,7 @@ def multi_detection_update(
     # once, but the anchors count a subset of size k once per member: divide each anchor's
     # weight by the expected size of its subset, 1 + sum_i beta_ji.
     log_likelihood_terms = log_weights.copy()
-    log_likelihood_terms[..., -m:] -= np.log1p(beta.sum(axis=-1))
+    log_likelihood_terms[..., -m:] -= np.log1p(expected_others)
     return new_mean, _symmetric(new_cov), np.logaddexp.reduce(log_likelihood_terms, axis=-1)
 
 

@@ -45,6 +45,7 @@ from baselines.kalman import (
     kalman_predict,
     multi_detection_update,
     pda_update,
+    reduce_mixture,
 )
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.validation import check_choice, check_real
@@ -254,12 +255,8 @@ class IMMPDAFilter(TrackerBase):
         self.means_, self.covs_, self.mode_probabilities_ = means, covs, probabilities
         if means.shape[0] == 1:
             return Estimate(means[0, 0::2].copy(), np.maximum(np.diag(covs[0])[0::2], 1e-12))
-        mean = probabilities @ means
-        spread = means - mean
-        cov = np.einsum("m,mij->ij", probabilities, covs) + np.einsum(
-            "m,mi,mj->ij", probabilities, spread, spread
-        )
-        return Estimate(mean[[0, 2]].copy(), np.maximum(np.diag(cov)[[0, 2]], 1e-12))
+        mean, cov = reduce_mixture(np.log(np.maximum(probabilities, 1e-300)), means, covs)
+        return Estimate(mean[0::2].copy(), np.maximum(np.diag(cov)[0::2], 1e-12))
 
 
 class PDAFilter(IMMPDAFilter):

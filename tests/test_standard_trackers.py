@@ -60,3 +60,78 @@ def test_noise_free_measurements_give_finite_estimates(tracker_id):
 def test_the_clairvoyant_singer_parameters_are_checked():
     with pytest.raises(ValueError, match="singer"):
         ClairvoyantFilter(singer="exact")
+
+
+def test_s1_process_noise_is_the_covariance_of_the_scenarios_steps():
+    """Within an S1 leg the scenario moves v_k = v_{k-1} + w and x_k = x_{k-1} +
+    dt (v_{k-1} + v_k) / 2, so (x_k - x_{k-1} - dt v_{k-1}, v_k - v_{k-1}) has the floor's
+    Q per axis. Checked on the steps of 300 drawn paths away from a waypoint and from the
+    speed clip, each entry within 5 standard errors of its sample estimate."""
+    from baselines.clairvoyant import white_acceleration_noise
+    from dgpt_gym.scenarios import get_scenario
+
+    scenario = get_scenario("S1")
+    dt = scenario.dt
+    noises = []
+    for seed in range(1000, 1300):
+        path = scenario.sample(np.random.default_rng(seed))
+        speed = np.linalg.norm(path.velocities, axis=1)
+        low, high = scenario.speed_range
+        free = (speed > low + 1e-9) & (speed < high - 1e-9)
+        steps = ~path.new_leg[1:] & free[1:] & free[:-1]
+        dx = path.positions[1:] - path.positions[:-1] - dt * path.velocities[:-1]
+        dv = path.velocities[1:] - path.velocities[:-1]
+        for axis in (0, 1):
+            noises.append(np.column_stack([dx[steps, axis], dv[steps, axis]]))
+    noises = np.vstack(noises)
+    expected = white_acceleration_noise(dt, scenario.acceleration_noise_std)[:2, :2]
+    sample = noises.T @ noises / noises.shape[0]
+    # the standard error of a sample second moment E[a b] is sqrt(E[a^2 b^2] - E[ab]^2) / sqrt(n)
+    products = noises[:, :, None] * noises[:, None, :]
+    standard_error = products.std(axis=0) / np.sqrt(noises.shape[0])
+    assert np.all(np.abs(sample - expected) < 5 * standard_error), (sample, expected)
+
+
+def test_clairvoyant_prediction_at_a_waypoint_moves_by_the_mean_of_old_and_new_velocity():
+    """At a waypoint x_k = x_{k-1} + dt (v_{k-1} + v_new) / 2 and v_k = v_new, with v_new's
+    mean from redrawn_velocity_moments: the predicted mean follows by hand."""
+    from dgpt_gym.scenarios import get_scenario
+
+    scenario = get_scenario("S1")
+    tracker = ClairvoyantFilter()
+    _, info = gym.make("DGPTrack-v0", scenario="S1").reset(seed=0)
+    tracker.reset(info["problem_spec"], truth=info)
+    tracker.mean_ = np.array([100.0, 12.0, 200.0, -5.0])
+    tracker.cov_ = np.diag([1.0, 0.5, 1.0, 0.5])
+    tracker._predict({"new_leg": True, "turn_rate": None})
+    new_mean, new_cov = redrawn_velocity_moments(
+        np.arctan2(-5.0, 12.0), scenario.speed_range, scenario.heading_change_deg
+    )
+    dt = scenario.dt
+    np.testing.assert_allclose(tracker.mean_[[1, 3]], new_mean)
+    np.testing.assert_allclose(
+        tracker.mean_[[0, 2]], [100.0, 200.0] + dt * (np.array([12.0, -5.0]) + new_mean) / 2
+    )
+    # position variance: 1 + (dt/2)^2 (0.5 + var_new); velocity covariance: that of v_new
+    np.testing.assert_allclose(tracker.cov_[np.ix_([1, 3], [1, 3])], new_cov)
+    np.testing.assert_allclose(tracker.cov_[0, 0], 1.0 + dt**2 / 4 * (0.5 + new_cov[0, 0]))
+
+
+def test_coverage_gap_probability_by_hand():
+    """(1 - pi r^2 / area^2)^N: two sensors whose discs each cover a tenth of the area
+    leave 0.9^2 = 0.81 uncovered."""
+    from baselines.pda import coverage_gap_probability
+    from dgpt_gym.problem import ProblemSpec
+
+    spec = ProblemSpec(
+        sensor_positions=np.zeros((2, 2)),
+        sensing_range=float(np.sqrt(0.1 / np.pi)),
+        noise_std=1.0,
+        clutter_rate=1.0,
+        detection_rate=1.0,
+        dt=1.0,
+        area=1.0,
+        clutter_sensors="all",
+        n_steps=10,
+    )
+    assert coverage_gap_probability(spec) == pytest.approx(0.81, rel=1e-12)
