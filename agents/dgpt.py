@@ -50,10 +50,15 @@ __all__ = [
     "HYPERPARAMETER_BOUNDS",
     "FIT_GRADIENT_TOLERANCE",
     "INPUTS",
+    "KERNELS",
+    "BOUNDS",
+    "NCV_STATE_PRIOR_STD",
     "update_batch",
 ]
 
 INPUTS = ("tgp", "stgp")
+KERNELS = ("se", "ncv")
+BOUNDS = ("tracking", "loose")
 
 FIT_GRADIENT_TOLERANCE = 1e-2
 """Projected-gradient tolerance of the online fit, in nats per unit log hyperparameter:
@@ -64,6 +69,7 @@ INITIAL_HYPERPARAMETERS = {
     "time_lengthscale": 5.0,  # s
     "space_lengthscale": 200.0,  # m (STGP only)
     "noise_var": 1.0,  # m^2
+    "process_noise": 1.0,  # m^2/s^3 (NCV kernel)
 }
 """Start of the hyperparameter search at the first step of an episode (per axis)."""
 
@@ -72,6 +78,7 @@ HYPERPARAMETER_BOUNDS = {
     "time_lengthscale": (1.0, 30.0),
     "space_lengthscale": (1.0, 1e4),
     "noise_var": (0.1, 1e4),
+    "process_noise": (1e-3, 1e5),
 }
 """Bounds of the fit (m^2, s, m). They encode what the data of a short window cannot: a
 length scale below the sampling period or far beyond the window is not identifiable, and
@@ -81,12 +88,27 @@ onto clutter at the next manoeuvre (measured: DGPT-RBCM mean NRMSE over S1-S4 x 
 1, 5 fell from 4.1 % to 3.0 % with these bounds and window 5)."""
 
 
+NCV_STATE_PRIOR_STD = {"position": 50.0, "velocity": 10.0}
+"""Standard deviations (m, m/s) of the NCV kernel's state prior at the current step around
+the broadcast prediction (:class:`agents.gp.NCVPrior`): a detecting sensor's target lies
+within its sensing range (50 m in every scenario), and the velocity relative to the
+predicted one changes by less than 10 m/s between steps at the scenarios' accelerations. Wide
+enough that an expert with two or more points barely feels it."""
+
+
 class DGPT(TrackerBase):
     """Distributed Gaussian-process tracker (DGPT): see the module docstring.
 
     Args:
         aggregation: ``"poe"``, ``"gpoe"``, ``"bcm"`` or ``"rbcm"`` (eqs. (8)-(20)).
         inputs: ``"tgp"`` (time) or ``"stgp"`` (previous estimate and time).
+        kernel: ``"se"`` (squared exponential, eq. (5)) or ``"ncv"`` (the
+            nearly-constant-velocity kernel, :class:`agents.gp.NCVPrior`, TGP only; with it
+            every expert integrates out its own position and velocity and learns the
+            process-noise intensity q through eq. (22)).
+        hyperparameter_bounds: ``"tracking"`` (:data:`HYPERPARAMETER_BOUNDS`, the default)
+            or ``"loose"`` (:func:`agents.gp.default_bounds`: only what keeps the numerics
+            finite; the paper states no bounds).
         window: C, the sliding-window length in steps (>= 2).
         delta: total failure probability of the UCB, in (0, 1); 0.003 is the paper's 99.7 %.
         mean: the GP prior mean over the window (:func:`agents.window.window_prior_mean`):
@@ -119,9 +141,17 @@ class DGPT(TrackerBase):
         anytime_ucb: bool = False,
         gating: bool = True,
         gate_threshold: float | None = None,
+        kernel: str = "se",
+        hyperparameter_bounds: str = "tracking",
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.inputs = check_choice("inputs", inputs, INPUTS)
+        self.kernel = check_choice("kernel", kernel, KERNELS)
+        self.hyperparameter_bounds = check_choice(
+            "hyperparameter_bounds", hyperparameter_bounds, BOUNDS
+        )
+        if self.kernel == "ncv" and self.inputs != "tgp":
+            raise ValueError(f"kernel='ncv' takes inputs='tgp'; got inputs={inputs!r}")
         self.window = check_integer("window", window, low=2)
         self.delta = check_real(
             "delta", delta, low=0.0, high=1.0, low_inclusive=False, high_inclusive=False
@@ -144,6 +174,8 @@ class DGPT(TrackerBase):
         return self.inputs == "stgp"
 
     def _named_parameters(self) -> list[str]:
+        if self.kernel == "ncv":
+            return ["process_noise", "noise_var"]
         middle = (
             ["space_lengthscale", "time_lengthscale"] if self._spatial else ["time_lengthscale"]
         )
@@ -161,7 +193,24 @@ class DGPT(TrackerBase):
 
     def bounds(self) -> np.ndarray:
         """(p, 2) bounds of the log hyperparameters."""
+        if self.hyperparameter_bounds == "loose":
+            return gp.default_bounds(len(self._named_parameters()) - 2)
         return np.log([HYPERPARAMETER_BOUNDS[name] for name in self._named_parameters()])
+
+    def ncv_prior(self) -> gp.NCVPrior | None:
+        """The NCV kernel's state prior (None for the SE kernel)."""
+        if self.kernel != "ncv":
+            return None
+        return gp.NCVPrior(
+            NCV_STATE_PRIOR_STD["position"] ** 2, NCV_STATE_PRIOR_STD["velocity"] ** 2
+        )
+
+    def prior_var(self, log_params: np.ndarray, relative_time: float) -> np.ndarray:
+        """(..., 2) prior variance k(x*, x*) of the GP at ``relative_time``."""
+        ncv = self.ncv_prior()
+        if ncv is None:
+            return np.exp(np.asarray(log_params)[..., 0])
+        return ncv.prior_var(log_params, relative_time)
 
     # -- Tracker API ----------------------------------------------------------------------
 
@@ -205,6 +254,8 @@ class DGPT(TrackerBase):
             type(self),
             self.aggregation,
             self.inputs,
+            self.kernel,
+            self.hyperparameter_bounds,
             self.delta,
             self.anytime_ucb,
             self.max_iterations,
@@ -266,12 +317,23 @@ class DGPT(TrackerBase):
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
+        origin = self._origin(points) if self.mean == "prediction" else None
         recorded = bool(points.shape[0]) and self._record(step, points, sensors)
-        data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled)
+        data = self.window_.expert_data(step, self._spatial, self.mean, self.pooled, origin)
         if data is None:  # nothing seen yet in this episode
             return Estimate.uninformed(self.spec_)
         self.step_ = step
         return data, recorded and data.n_points >= 3
+
+    def _origin(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The line the experts model deviations from (``mean="prediction"``): the broadcast
+        prediction for this step and the predicted displacement per step; before any
+        prediction, the median of the step's measurements at rest."""
+        if self.prior_next_ is not None and self.estimate_ is not None:
+            position = np.asarray(self.prior_next_[0], dtype=float)
+            return position, position - self.estimate_
+        centre = np.median(points, axis=0) if points.shape[0] else np.zeros(2)
+        return centre, np.zeros(2)
 
     def _test_inputs(self, data: ExpertData, relative_time: float, previous: np.ndarray):
         """(E, 2, M, 1, d) test inputs at ``relative_time`` with spatial inputs ``previous``
@@ -314,13 +376,16 @@ class _Group:
         self.first = self.trackers[0]
         self.data = ExpertData.stack([item.padded(n_experts, n_points) for item in data])
         self.valid = self.data.experts[:, None, :]  # (E, 1, M)
+        self.training = gp.TrainingData.build(
+            self.data.X, self.data.z, self.data.mask[..., None, :, :], ncv=self.first.ncv_prior()
+        )
 
     def fit(self, log_params: np.ndarray) -> np.ndarray:
         """Step 3: the maximum-likelihood fit of every episode's (2, p), warm-started from
         the last step's hyperparameters and BFGS curvature."""
         result = gp.fit_hyperparameters(
             log_params,
-            self.data.training,
+            self.training,
             bounds=self.first.bounds(),
             max_iterations=self.first.max_iterations,
             gradient_tolerance=FIT_GRADIENT_TOLERANCE,
@@ -337,13 +402,13 @@ class _Group:
         """Factorize every episode's covariances; an episode whose matrices stay indefinite
         even with jitter restarts from :data:`INITIAL_HYPERPARAMETERS` (``log_params`` is
         changed in place)."""
-        fact = gp.factorize(log_params, self.data.training)
+        fact = gp.factorize(log_params, self.training)
         broken = np.any(fact.failed, axis=-1)
         if np.any(broken):
             log_params[broken] = self.first.initial_log_params()
             for index in np.flatnonzero(broken):
                 self.trackers[index].curvature_ = self.first.initial_curvature()
-            fact = gp.factorize(log_params, self.data.training)
+            fact = gp.factorize(log_params, self.training)
             fact.check()
         return fact
 
@@ -352,7 +417,7 @@ class _Group:
         measurements."""
         first = self.first
         fact = self.factorize(log_params)
-        prior_var = np.exp(log_params[..., 0])
+        prior_var = first.prior_var(log_params, 0.0)
         residual_var = prior_var + np.exp(log_params[..., -1])  # marginal variance of a summary
         previous = np.stack(
             [
@@ -361,7 +426,7 @@ class _Group:
             ]
         )
         x_now = first._test_inputs(self.data, 0.0, previous)
-        mean_now, var_now = gp.predict(log_params, self.data.training, None, None, x_now, fact)
+        mean_now, var_now = gp.predict(log_params, self.training, None, None, x_now, fact)
         estimate, estimate_var = first._aggregate(
             mean_now[..., 0], var_now[..., 0], prior_var, self.data, 0.0, residual_var, self.valid
         )
@@ -390,11 +455,11 @@ class _Group:
         """The aggregated next-step prediction from each tracker's ``estimate_`` (stored in
         ``prior_next_``) and each expert's, which gate the next step's measurements."""
         first = self.first
-        prior_var = np.exp(log_params[..., 0])
+        prior_var = first.prior_var(log_params, 1.0)
         residual_var = prior_var + np.exp(log_params[..., -1])
         estimates = np.stack([tracker.estimate_ for tracker in self.trackers])
         x_next = first._test_inputs(self.data, 1.0, estimates)
-        mean, var = gp.predict(log_params, self.data.training, None, None, x_next, fact)
+        mean, var = gp.predict(log_params, self.training, None, None, x_next, fact)
         mean, var = mean[..., 0], var[..., 0]
         prior_next = first._aggregate(
             mean, var, prior_var, self.data, 1.0, residual_var, self.valid

@@ -30,6 +30,7 @@ __all__ = [
     "Factorization",
     "unpack",
     "se_kernel",
+    "NCVPrior",
     "factorize",
     "log_marginal_likelihood",
     "predict",
@@ -72,10 +73,51 @@ def se_kernel(x1: np.ndarray, x2: np.ndarray, log_params: np.ndarray) -> np.ndar
 
 
 @dataclass(frozen=True)
+class NCVPrior:
+    """The nearly-constant-velocity (NCV) Gaussian process on the relative time tau (the
+    last input): the coordinate is ``x(tau) = x0 + v0 tau + w(tau)`` with the state at
+    tau = 0 drawn from N(0, diag(``position_var``, ``velocity_var``)) and w the twice
+    integrated white noise of intensity q on either side of 0 (independent sides),
+
+        k(s, t) = position_var + velocity_var s t
+                  + q [min(|s|, |t|)^3 / 3 + ||s| - |t|| min(|s|, |t|)^2 / 2]  (s t >= 0),
+
+    and 0 for the last term where s t < 0 (Solin & Sarkka's integrated Wiener velocity
+    kernel, the GP form of the NCV model; the first two terms are the explicit linear basis
+    [1, tau] with a Gaussian prior on its coefficients integrated out, Rasmussen & Williams
+    Sec. 2.7, eq. 2.39). q is the learnt hyperparameter (in the place of sigma_f^2); the
+    state prior is fixed, so every expert integrates its own intercept and slope out.
+    """
+
+    position_var: float
+    velocity_var: float
+
+    def unit_kernel(self, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+        """The integrated-Wiener term with q = 1: (..., n1) x (..., n2) -> (..., n1, n2)."""
+        s, t = t1[..., :, None], t2[..., None, :]
+        shorter = np.minimum(np.abs(s), np.abs(t))
+        value = shorter**3 / 3.0 + np.abs(np.abs(s) - np.abs(t)) * shorter**2 / 2.0
+        return np.where(s * t >= 0, value, 0.0)
+
+    def basis_kernel(self, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+        """The integrated-out state: position_var + velocity_var s t, (..., n1, n2)."""
+        return self.position_var + self.velocity_var * t1[..., :, None] * t2[..., None, :]
+
+    def prior_var(self, log_params: np.ndarray, tau: float) -> np.ndarray:
+        """k(tau, tau) per problem of ``log_params`` (*B, 2)."""
+        q = np.exp(np.asarray(log_params, dtype=float)[..., 0])
+        return self.position_var + self.velocity_var * tau * tau + q * abs(tau) ** 3 / 3.0
+
+
+@dataclass(frozen=True)
 class TrainingData:
     """Training inputs and outputs with what does not depend on the hyperparameters
     precomputed: the per-dimension squared input differences and the mask weights.
-    Build it once (:meth:`build`) and evaluate many hyperparameters on it."""
+    Build it once (:meth:`build`) and evaluate many hyperparameters on it.
+
+    With ``ncv`` (an :class:`NCVPrior`) the covariance is the NCV kernel on the last input
+    instead of the squared exponential: ``log_params`` is then ``[log q, log sigma_n^2]``
+    and ``unit_kernel`` / ``basis_kernel`` hold its two parts (masked)."""
 
     X: np.ndarray
     z: np.ndarray
@@ -84,23 +126,44 @@ class TrainingData:
     squared_differences: np.ndarray
     padding_diagonal: np.ndarray
     identity: np.ndarray
+    ncv: NCVPrior | None = None
+    unit_kernel: np.ndarray | None = None
+    basis_kernel: np.ndarray | None = None
 
     @classmethod
-    def build(cls, X: np.ndarray, z: np.ndarray, mask: np.ndarray | None = None) -> TrainingData:
+    def build(
+        cls,
+        X: np.ndarray,
+        z: np.ndarray,
+        mask: np.ndarray | None = None,
+        ncv: NCVPrior | None = None,
+    ) -> TrainingData:
         X = np.asarray(X, dtype=float)
         if mask is None:
             mask = np.ones(X.shape[:-1], dtype=bool)
         weight = np.broadcast_to(np.asarray(mask, dtype=float), X.shape[:-1])
-        diff = X[..., :, None, :] - X[..., None, :, :]
+        pair_weight = weight[..., :, None] * weight[..., None, :]
         identity = np.eye(X.shape[-2])
+        unit = basis = None
+        if ncv is None:
+            diff = X[..., :, None, :] - X[..., None, :, :]
+            squared_differences = diff * diff
+        else:  # no length scales: an empty last axis keeps the gradient's shapes
+            squared_differences = np.zeros(X.shape[:-1] + X.shape[-2:-1] + (0,))
+            tau = X[..., -1]
+            unit = ncv.unit_kernel(tau, tau) * pair_weight
+            basis = ncv.basis_kernel(tau, tau) * pair_weight
         return cls(
             X=X,
             z=np.asarray(z, dtype=float) * weight,
             weight=weight,
-            pair_weight=weight[..., :, None] * weight[..., None, :],
-            squared_differences=diff * diff,
+            pair_weight=pair_weight,
+            squared_differences=squared_differences,
             padding_diagonal=(1.0 - weight)[..., None] * identity,
             identity=identity,
+            ncv=ncv,
+            unit_kernel=unit,
+            basis_kernel=basis,
         )
 
 
@@ -174,9 +237,13 @@ def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
     log_params = np.asarray(log_params, dtype=float)
     params = np.exp(log_params)[..., None, None, None, :]
     scaled = data.squared_differences / (params[..., 1:-1] * params[..., 1:-1])
-    kernel = params[..., 0] * data.pair_weight * np.exp(-0.5 * scaled.sum(axis=-1))
     noise_diagonal = params[..., -1] * data.weight[..., None] * data.identity
-    sigma = kernel + noise_diagonal + data.padding_diagonal
+    if data.ncv is None:
+        kernel = params[..., 0] * data.pair_weight * np.exp(-0.5 * scaled.sum(axis=-1))
+        sigma = kernel + noise_diagonal + data.padding_diagonal
+    else:  # the learnt part (q times the unit kernel) is what the gradient differentiates
+        kernel = params[..., 0] * data.unit_kernel
+        sigma = kernel + data.basis_kernel + noise_diagonal + data.padding_diagonal
     problems = log_params.shape[:-1]
     try:
         inverse, log_det = _cholesky_inverse(sigma)
@@ -264,16 +331,24 @@ def predict(
     prior mean: ``mu = k*^T Sigma^-1 z``, ``sigma^2 = k** - k*^T Sigma^-1 k*``.
 
     ``X_test`` (*B, M, s, d); returns mean and variance (*B, M, s). The variance is clipped
-    to ``[1e-12 sigma_f^2, sigma_f^2]`` against round-off.
+    to ``[1e-12 k**, k**]`` against round-off.
     """
     data = _as_data(X, z, mask)
     fact = factorize(log_params, data) if factorization is None else factorization
-    cross = (
-        se_kernel(data.X, np.asarray(X_test, dtype=float), log_params) * data.weight[..., :, None]
-    )
+    X_test = np.asarray(X_test, dtype=float)
+    if data.ncv is None:
+        cross = se_kernel(data.X, X_test, log_params)
+        prior = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None]
+    else:
+        q = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None, None]
+        tau, tau_test = data.X[..., -1], X_test[..., -1]
+        cross = q * data.ncv.unit_kernel(tau, tau_test) + data.ncv.basis_kernel(tau, tau_test)
+        prior = q[..., 0] * np.abs(tau_test) ** 3 / 3.0 + data.ncv.basis_kernel(
+            tau_test[..., None], tau_test[..., None]
+        )[..., 0, 0]
+    cross = cross * data.weight[..., :, None]
     mean = np.einsum("...ns,...n->...s", cross, fact.alpha)
     reduction = np.einsum("...ns,...nm,...ms->...s", cross, fact.inverse, cross)
-    prior = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None]
     variance = np.clip(prior - reduction, 1e-12 * prior, prior)
     return mean, variance
 

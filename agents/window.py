@@ -4,14 +4,12 @@ expert arrays for the GP core."""
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from agents.gating import group_starts
-from agents.gp import TrainingData
 
 __all__ = [
     "StepRecord",
@@ -103,11 +101,6 @@ class ExpertData:
         """(..., M) True for real experts, False for padding."""
         return self.mask.any(axis=-1)
 
-    @functools.cached_property
-    def training(self) -> TrainingData:
-        """The GP core's prepared form of ``X``, ``z`` and ``mask``."""
-        return TrainingData.build(self.X, self.z, self.mask[..., None, :, :])
-
     def prior_mean(self, relative_time: float) -> np.ndarray:
         """(..., 2) prior mean of the coordinates at ``relative_time`` (s after the window's
         end)."""
@@ -175,13 +168,21 @@ class SlidingWindow:
         while self.records[0].step <= record.step - max(self.capacity, self.length):
             self.records.popleft()
 
-    def expert_data(self, step: int, spatial: bool, mean: str, pooled: bool) -> ExpertData | None:
+    def expert_data(
+        self,
+        step: int,
+        spatial: bool,
+        mean: str,
+        pooled: bool,
+        origin: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> ExpertData | None:
         """Padded expert arrays of the window ending at ``step`` (None if there is no data).
 
         Inputs: the time relative to ``step`` (TGP), preceded for STGP by the previous
         estimate of the same coordinate (eqs. (25)-(26)). The GP models the outputs minus a
-        prior mean (:func:`window_prior_mean`). ``pooled`` puts every summary into one
-        expert (the centralized GP).
+        prior mean (:func:`window_prior_mean`); for ``mean="prediction"`` that is the line
+        ``origin`` = (position (2,), velocity (2,)) at ``step``, which no summary of the
+        window enters. ``pooled`` puts every summary into one expert (the centralized GP).
         """
         if not self.records:
             return None
@@ -198,9 +199,15 @@ class SlidingWindow:
         labels, mask, (padded_summaries, padded_steps, padded_previous) = pad_by_group(
             groups, summaries, steps, previous
         )
-        intercept, slope, trend_covariance = window_prior_mean(
-            mean, (steps - step).astype(float), summaries
-        )
+        if mean == "prediction":
+            if origin is None:
+                raise ValueError('mean="prediction" needs the origin line')
+            intercept, slope = (np.asarray(value, dtype=float) for value in origin)
+            trend_covariance = np.zeros((2, 2))
+        else:
+            intercept, slope, trend_covariance = window_prior_mean(
+                mean, (steps - step).astype(float), summaries
+            )
         relative = (padded_steps - step).astype(float)
         trend = intercept[:, None, None] + slope[:, None, None] * relative
         z = (np.moveaxis(padded_summaries, -1, 0) - trend) * mask
@@ -213,7 +220,7 @@ class SlidingWindow:
         return ExpertData(labels, X, z, mask, intercept, slope, trend_covariance)
 
 
-PRIOR_MEANS = ("linear", "window", "zero")
+PRIOR_MEANS = ("linear", "window", "zero", "prediction")
 
 
 def window_prior_mean(kind: str, times: np.ndarray, summaries: np.ndarray):
@@ -227,6 +234,9 @@ def window_prior_mean(kind: str, times: np.ndarray, summaries: np.ndarray):
       constant-velocity trend; the GP models the deviations from it, and predictions
       through a stretch without measurements follow the trend instead of reverting to a
       constant. With a single time in the window the slope is 0 (and treated as known).
+
+    (``"prediction"``, a line given from outside the window, is handled by
+    :meth:`SlidingWindow.expert_data`.)
     """
     covariance = np.zeros((2, 2))
     if kind == "zero":

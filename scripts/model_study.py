@@ -1,0 +1,126 @@
+"""Compare GP tracking models on training seeds (never the evaluation seeds 0-99).
+
+Every candidate runs on S1-S4, the reference and random paths, clutter rates 1 and 5,
+sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RMSE (m), NRMSE
+(%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
+(nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), and the median
+step time; then a summary per candidate over the cells.
+
+    python scripts/model_study.py                  # the built-in candidates
+    python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import itertools
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from dgpt_gym.sweep import RunUnit, run_units  # noqa: E402
+
+CANDIDATES = {
+    "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
+    "se-zero": ("agents.dgpt:DGPT", {"window": 3, "mean": "zero"}),
+    "se-zero-loose": (
+        "agents.dgpt:DGPT",
+        {"window": 3, "mean": "zero", "hyperparameter_bounds": "loose"},
+    ),
+    "ncv-local-bcm": (
+        "agents.dgpt:DGPT",
+        {"window": 4, "kernel": "ncv", "mean": "prediction", "aggregation": "bcm"},
+    ),
+    "ncv-local-rbcm": (
+        "agents.dgpt:DGPT",
+        {"window": 4, "kernel": "ncv", "mean": "prediction", "aggregation": "rbcm"},
+    ),
+    "ncv-centralized": (
+        "baselines.standard_gp:StandardGP",
+        {"window": 4, "kernel": "ncv", "mean": "prediction"},
+    ),
+}
+"""Candidate models: the default (SE kernel around the pooled least-squares trend), the
+paper's zero mean with and without bounds, and the NCV kernel with every expert's state
+integrated out (distributed with BCM / RBCM, and centralized)."""
+
+SCENARIOS = ("S1", "S2", "S3", "S4")
+TRAJECTORIES = ("fixed", "random")
+CLUTTER_RATES = (1.0, 5.0)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--candidates", nargs="+", choices=sorted(CANDIDATES), default=list(CANDIDATES)
+    )
+    parser.add_argument("--seeds", type=int, default=6, help="training seeds 1000 .. 1000+N-1")
+    parser.add_argument("--workers", type=int, default=2)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.seeds < 1:
+        print("error: --seeds must be at least 1", file=sys.stderr)
+        return 2
+    units, keys = [], []
+    for name in args.candidates:
+        entry_point, kwargs = CANDIDATES[name]
+        for cell in itertools.product(SCENARIOS, TRAJECTORIES, CLUTTER_RATES):
+            scenario, trajectory, clutter = cell
+            env = {
+                "scenario": scenario,
+                "noise_std": 1.0,
+                "clutter_rate": clutter,
+                "trajectory": trajectory,
+            }
+            for seed in range(1000, 1000 + args.seeds):
+                units.append(RunUnit(name, entry_point, kwargs, env, seed))
+                keys.append((name, *cell))
+    outcomes = run_units(units, workers=args.workers)
+    by_cell = collections.defaultdict(list)
+    for key, outcome in zip(keys, outcomes):
+        if outcome["status"] != "ok":
+            print(f"failed {key}: {outcome['error']}", file=sys.stderr)
+            continue
+        by_cell[key].append(outcome["metrics"])
+
+    def mean(rows, key):
+        return float(np.nanmean([row[key] for row in rows]))
+
+    print("candidate        cell                rmse_2d  nrmse%  nees_med_det  cov3_det%  ms")
+    totals = collections.defaultdict(list)
+    for (name, scenario, trajectory, clutter), rows in by_cell.items():
+        nrmse = 50 * (mean(rows, "nrmse_x") + mean(rows, "nrmse_y"))
+        coverage = 50 * (
+            mean(rows, "coverage_3sigma_x_detected") + mean(rows, "coverage_3sigma_y_detected")
+        )
+        nees = float(np.nanmedian([row["nees_median_detected"] for row in rows]))
+        rmse = mean(rows, "rmse_2d")
+        cell = f"{scenario} {trajectory:6s} c{clutter:g}"
+        print(
+            f"{name:16s} {cell:18s} {rmse:8.2f} {nrmse:7.2f} {nees:12.3f} {coverage:9.2f}"
+            f" {float(np.median([row['step_time_ms'] for row in rows])):5.2f}"
+        )
+        totals[name].append((trajectory, rmse, nrmse, nees, coverage))
+    print()
+    print("candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%")
+    for name, cells in totals.items():
+        fixed = np.mean([c[1] for c in cells if c[0] == "fixed"])
+        random = np.mean([c[1] for c in cells if c[0] == "random"])
+        rest = np.mean([c[2:] for c in cells], axis=0)
+        print(
+            f"{name:16s} {fixed:10.2f} {random:12.2f} {rest[0]:7.2f} {rest[1]:12.3f}"
+            f" {rest[2]:10.2f}"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
