@@ -26,7 +26,13 @@ from dgpt_gym import baseline_report, report
 from dgpt_gym.evaluation import add_floor_ratios
 from dgpt_gym.plots import plot_scenarios, plot_training_time, plot_ucb_vs_ci, read_training_time
 from dgpt_gym.store import ResultsStore
-from dgpt_gym.sweep import PAPER_GP_TRACKERS, Grid, summarize_store, sweep_units
+from dgpt_gym.sweep import (
+    PAPER_AS_PRINTED_TRACKERS,
+    PAPER_GP_TRACKERS,
+    Grid,
+    summarize_store,
+    sweep_units,
+)
 
 __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_UCB_GAIN"]
 
@@ -291,7 +297,11 @@ def write_outputs(
     baselines.write_text(baselines_markdown(summaries, command, per_run_nrmse(grids, out)))
     written.append(baselines)
 
-    paper_rows = [row for row in summaries if row["tracker"] in PAPER_GP_TRACKERS]
+    paper_rows = [
+        row
+        for row in summaries
+        if row["tracker"] in PAPER_GP_TRACKERS + PAPER_AS_PRINTED_TRACKERS
+    ]
     if paper_rows:
         tables = report_dir / "results_tables.md"
         report.write_paper_tables(paper_rows, tables, command)

@@ -22,11 +22,16 @@ __all__ = [
     "summary_against_paper",
     "write_paper_tables",
     "APPROACHES",
+    "PAPER_SUFFIX",
 ]
 
 PAPER_NRMSE_PATH = Path(__file__).with_name("data") / "paper_nrmse.csv"
 APPROACHES = ("gp", "dgpt-rbcm", "dgpt-gpoe")
 APPROACH_NAMES = {"gp": "Standard GP", "dgpt-rbcm": "DGPT-RBCM", "dgpt-gpoe": "DGPT-GPoE"}
+
+
+PAPER_SUFFIX = "-paper"
+"""Tracker ids with the paper's GP model as printed end in this."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -48,16 +53,17 @@ def paper_nrmse() -> dict[tuple, tuple[float, str]]:
     return table
 
 
-def tracker_id(approach: str, inputs: str) -> str:
+def tracker_id(approach: str, inputs: str, suffix: str = "") -> str:
     """The registered tracker of a paper approach: ``gp`` / ``dgpt-rbcm`` / ``dgpt-gpoe``
-    with ``-stgp`` appended for spatio-temporal inputs."""
-    return approach if inputs == "tgp" else f"{approach}-stgp"
+    with ``-stgp`` appended for spatio-temporal inputs, then ``suffix`` (``"-paper"`` for
+    the model as printed)."""
+    return (approach if inputs == "tgp" else f"{approach}-stgp") + suffix
 
 
 def paper_value(row: dict, axis: str) -> float | None:
     """The paper's NRMSE (%) for a per-cell summary ``row`` and ``axis``, or None where the
     paper has no such cell (other trackers, noise levels or clutter rates)."""
-    tracker = row["tracker"]
+    tracker = row["tracker"].removesuffix(PAPER_SUFFIX)
     inputs = "stgp" if tracker.endswith("-stgp") else "tgp"
     approach = tracker.removesuffix("-stgp")
     reference = paper_nrmse().get(
@@ -66,13 +72,17 @@ def paper_value(row: dict, axis: str) -> float | None:
     return None if reference is None else reference[0]
 
 
-def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
-    """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store`)."""
+def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: str = "") -> str:
+    """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store`);
+    ``suffix="-paper"`` tabulates the trackers with the paper's model as printed."""
     ours = {
         (r["tracker"], r["noise_std"], r["clutter_rate"]): r
         for r in rows
         if r["scenario"] == scenario
+        and r["tracker"] in {tracker_id(a, inputs, suffix) for a in APPROACHES}
     }
+    if not ours:
+        return ""
     paper = paper_nrmse()
     table_name = next(name for key, (_, name) in paper.items() if key[:2] == (inputs, scenario))
     noise_levels = sorted({key[1] for key in ours})
@@ -80,8 +90,9 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
     header = ["noise std (m)", "clutter rate"] + [
         f"{APPROACH_NAMES[a]} {axis.upper()}" for a in APPROACHES for axis in "xy"
     ]
+    model = ", the paper's model as printed" if suffix else ""
     lines = [
-        f"**{scenario}, {inputs.upper()}** (paper: {table_name}). Cells: ours % (paper %, ours - paper).",
+        f"**{scenario}, {inputs.upper()}{model}** (paper: {table_name}). Cells: ours % (paper %, ours - paper).",
         "",
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),
@@ -90,7 +101,7 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
         for clutter in clutter_rates:
             cells = [f"{noise:g}", f"{clutter:g}"]
             for approach in APPROACHES:
-                row = ours.get((tracker_id(approach, inputs), noise, clutter))
+                row = ours.get((tracker_id(approach, inputs, suffix), noise, clutter))
                 for axis in "xy":
                     reference = paper.get((inputs, scenario, noise, clutter, approach, axis))
                     if row is None:
@@ -107,15 +118,16 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str) -> str:
     return "\n".join(lines)
 
 
-def summary_against_paper(rows: list[dict]) -> dict[str, float]:
+def summary_against_paper(rows: list[dict], suffix: str = "") -> dict[str, float]:
     """How our NRMSEs compare with the paper's over every cell both have: the number of
-    cells, those at or below the paper's, and the mean of ours and of the paper's (%)."""
+    cells, those at or below the paper's, and the mean of ours and of the paper's (%)
+    (``suffix="-paper"``: of the trackers with the paper's model as printed)."""
     paper = paper_nrmse()
     ours, theirs = [], []
     for row in rows:
         for inputs in ("tgp", "stgp"):
             for approach in APPROACHES:
-                if row["tracker"] != tracker_id(approach, inputs):
+                if row["tracker"] != tracker_id(approach, inputs, suffix):
                     continue
                 for axis in "xy":
                     key = (
@@ -154,10 +166,23 @@ def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None
         f" mean NRMSE {summary['mean_ours']:.2f} % (paper {summary['mean_paper']:.2f} %).",
         "",
     ]
+    as_printed = summary_against_paper(rows, PAPER_SUFFIX)
+    if as_printed["cells"]:
+        parts += [
+            "The paper's model as printed (`-paper` trackers: zero prior mean on raw coordinates;"
+            f" {', '.join(sorted({str(r['noise_std']) for r in rows if r['tracker'].endswith(PAPER_SUFFIX)}))} m noise only):"
+            f" {as_printed['at_or_below_paper']} of {as_printed['cells']} cells at or below the"
+            f" paper's value; mean NRMSE {as_printed['mean_ours']:.2f} % (paper"
+            f" {as_printed['mean_paper']:.2f} % on the same cells).",
+            "",
+        ]
     scenarios = sorted({row["scenario"] for row in rows})
     for inputs in ("tgp", "stgp"):
         for scenario in scenarios:
-            parts += [paper_table_markdown(rows, scenario, inputs), ""]
+            for suffix in ("", PAPER_SUFFIX):
+                table = paper_table_markdown(rows, scenario, inputs, suffix)
+                if table:
+                    parts += [table, ""]
     parts += windows_markdown()
     path.write_text("\n".join(parts))
     keys = list(rows[0])
@@ -182,7 +207,8 @@ def windows_markdown() -> list[str]:
         "## Window lengths",
         "",
         "Chosen by `python scripts/evaluate.py --tune-windows`: for each tracker and scenario the window"
-        f" with the lowest NRMSE (mean over axes, clutter rates 1 and 5, sigma_z = 1, training seeds"
+        f" with the lowest NRMSE (mean over axes, the reference and random paths, clutter rates 1"
+        " and 5, sigma_z = 1, training seeds"
         f" {TRAINING_SEEDS.start}-{TRAINING_SEEDS.stop - 1}, disjoint from the evaluation seeds). Cells: NRMSE %"
         " of each window; the chosen one in bold.",
         "",

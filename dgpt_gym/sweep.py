@@ -40,6 +40,7 @@ __all__ = [
     "QUICK_SWEEP",
     "PAPER_SWEEP",
     "PAPER_GP_TRACKERS",
+    "PAPER_AS_PRINTED_TRACKERS",
     "STANDARD_TRACKERS",
 ]
 
@@ -57,6 +58,10 @@ PAPER_GP_TRACKERS = (
 )
 """The approaches of the paper's Tables II-IX: standard GP, DGPT-RBCM, DGPT-GPoE, each
 with temporal (TGP) and spatio-temporal (STGP) inputs."""
+
+PAPER_AS_PRINTED_TRACKERS = tuple(f"{tracker}-paper" for tracker in PAPER_GP_TRACKERS)
+"""The same approaches with the paper's model as printed (zero prior mean on raw
+coordinates; ``PAPER_MODEL`` in :mod:`dgpt_gym`), to set beside our defaults."""
 
 
 @dataclass(frozen=True)
@@ -154,6 +159,7 @@ QUICK_SWEEP = (
 
 PAPER_SWEEP = (
     Grid(trackers=PAPER_GP_TRACKERS + STANDARD_TRACKERS, noise_levels=(1.0, 2.0, 4.0), runs=100),
+    Grid(trackers=PAPER_AS_PRINTED_TRACKERS, noise_levels=(1.0,), runs=100),
     Grid(
         trackers=("hybrid", "hybrid-paper", "cpf"),
         noise_levels=(1.0,),
@@ -162,7 +168,8 @@ PAPER_SWEEP = (
     ),
 )
 """``--paper``: Tables II-IX (six GP trackers, sigma_z in {1, 2, 4}, clutter 1 and 5) with
-the standard trackers and the clairvoyant floor on every cell, and the hybrid filter in
+the standard trackers and the clairvoyant floor on every cell; the paper's model as
+printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter in
 both variants and the CPF at sigma_z = 1 and both clutter rates (Fig. 8 is the clutter-5
 cell); 100 Monte Carlo runs each."""
 

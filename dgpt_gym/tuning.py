@@ -63,24 +63,33 @@ def tune_windows(
     noise_std: float = 1.0,
     workers: int = 1,
     progress: bool = True,
+    trajectories: Iterable[str] = ("fixed", "random"),
 ) -> tuple[dict[str, dict[str, int]], list[dict]]:
-    """Grid search of the window length; returns the best windows and every grid row
-    (tracker, scenario, window, mean NRMSE)."""
+    """Grid search of the window length on the scenarios' reference paths and on random
+    paths (a window must not be fitted to four paths); returns the best windows and every
+    grid row (tracker, scenario, window, mean NRMSE)."""
     from dgpt_gym.registry import tracker_spec
     from dgpt_gym.sweep import RunUnit, run_units
 
     tracker_ids, scenarios = list(tracker_ids), list(scenarios)
     windows, seeds, clutter_rates = list(windows), list(seeds), list(clutter_rates)
+    trajectories = list(trajectories)
     keys = [(t, s, w) for t in tracker_ids for s in scenarios for w in windows]
     units = [
         RunUnit(
             t,
             tracker_spec(t).entry_point,
             {**tracker_spec(t).kwargs, "window": w},
-            {"scenario": s, "noise_std": float(noise_std), "clutter_rate": float(c)},
+            {
+                "scenario": s,
+                "noise_std": float(noise_std),
+                "clutter_rate": float(c),
+                "trajectory": trajectory,
+            },
             seed,
         )
         for t, s, w in keys
+        for trajectory in trajectories
         for c in clutter_rates
         for seed in seeds
     ]
@@ -89,7 +98,7 @@ def tune_windows(
     if failed:
         raise RuntimeError(f"{len(failed)} runs of the window search failed, e.g. {failed[0]}")
     results = [o["metrics"] for o in outcomes]
-    per_key = len(clutter_rates) * len(seeds)
+    per_key = len(trajectories) * len(clutter_rates) * len(seeds)
     rows, best = [], {}
     for index, (tracker, scenario, window) in enumerate(keys):
         chunk = results[index * per_key : (index + 1) * per_key]

@@ -24,6 +24,7 @@ from dgpt_gym.outputs import write_outputs
 from dgpt_gym.registry import tracker_spec
 from dgpt_gym.sweep import (
     DEFAULT_BATCH_SIZE,
+    PAPER_AS_PRINTED_TRACKERS,
     PAPER_GP_TRACKERS,
     PAPER_SWEEP,
     QUICK_SWEEP,
@@ -144,7 +145,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--tune-windows",
         action="store_true",
-        help=f"grid-search the window of {' '.join(PAPER_GP_TRACKERS)} on training seeds, "
+        help="grid-search the window of the GP trackers (with their -paper variants) on "
+        "training seeds, fixed and random paths, "
         "rewrite dgpt_gym/tuned_windows.json and exit",
     )
     parser.add_argument(
@@ -197,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.tune_windows:
             best, rows = tune_windows(
-                PAPER_GP_TRACKERS,
+                PAPER_GP_TRACKERS + PAPER_AS_PRINTED_TRACKERS,
                 args.scenarios,
                 workers=args.workers,
                 progress=not args.no_progress,

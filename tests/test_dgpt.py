@@ -183,3 +183,32 @@ def test_boolean_arguments_refuse_non_booleans(name, value):
     """A string such as "false" would otherwise count as True."""
     with pytest.raises(ValueError, match=name):
         DGPT(**{name: value})
+
+
+def test_the_paper_model_reverts_to_the_raw_origin_the_default_follows_its_trend():
+    """``-paper`` trackers have the zero prior mean on raw coordinates: through a long
+    stretch without measurements their estimate returns to (0, 0); the default's
+    constant-velocity trend carries it on along the track."""
+    import gymnasium as gym
+
+    import dgpt_gym
+    from dgpt_gym.registry import make_tracker
+
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    finals = {}
+    for tracker_id in ("dgpt-rbcm-paper", "dgpt-rbcm"):
+        observation, info = env.reset(seed=1001)
+        tracker = make_tracker(tracker_id, window=3)
+        tracker.reset(info["problem_spec"])
+        for _ in range(20):
+            estimate = tracker.update(observation)
+            observation, *_ = env.step(estimate.mean)
+        last_seen = estimate.mean
+        empty = dict(observation, mask=np.zeros_like(observation["mask"]))
+        for step in range(300):
+            estimate = tracker.update(dict(empty, t=int(observation["t"]) + step))
+        finals[tracker_id] = (last_seen, estimate.mean)
+    assert np.linalg.norm(finals["dgpt-rbcm"][0]) > 100  # the track is far from the origin
+    assert np.linalg.norm(finals["dgpt-rbcm-paper"][1]) < 1.0
+    moved = finals["dgpt-rbcm"][1] - finals["dgpt-rbcm"][0]
+    assert np.linalg.norm(moved) > 1000  # 300 s at 10-25 m/s along the trend

@@ -40,6 +40,28 @@ def test_paper_table_cells_show_ours_paper_and_difference():
     }
 
 
+def test_the_paper_model_as_printed_gets_its_own_tables():
+    rows = [
+        {
+            "tracker": tracker,
+            "scenario": "S1",
+            "noise_std": 1.0,
+            "clutter_rate": 1.0,
+            "nrmse_x": nrmse,
+            "nrmse_y": nrmse,
+        }
+        for tracker, nrmse in (("dgpt-rbcm", 0.0105), ("dgpt-rbcm-paper", 0.0300))
+    ]
+    ours = report.paper_table_markdown(rows, "S1", "tgp")
+    printed = report.paper_table_markdown(rows, "S1", "tgp", suffix="-paper")
+    assert "| 1 | 1 | - | - | 1.05 (0.93, +0.12) | 1.05 (0.95, +0.10) | - | - |" in ours
+    assert "as printed" in printed
+    assert "| 1 | 1 | - | - | 3.00 (0.93, +2.07) | 3.00 (0.95, +2.05) | - | - |" in printed
+    assert report.summary_against_paper(rows, "-paper")["mean_ours"] == pytest.approx(3.0)
+    assert report.summary_against_paper(rows)["mean_ours"] == pytest.approx(1.05)
+    assert report.paper_value(rows[1], "x") == 0.93
+
+
 def test_tuned_windows_lookup():
     windows = tuning.tuned_windows()
     assert set(windows) >= {"gp", "dgpt-rbcm", "dgpt-gpoe"}
@@ -53,12 +75,18 @@ def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
     )
     scores = {row["window"]: row["nrmse"] for row in rows}
     assert best == {"dgpt-rbcm": {"S3": min(scores, key=scores.get)}}
-    env_kwargs = {"scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0}
-    unit = RunUnit(
-        "dgpt-rbcm", "agents.dgpt:DGPT", {"aggregation": "rbcm", "window": 6}, env_kwargs, 1000
-    )
-    direct = run_unit(unit)["metrics"]
-    assert scores[6] == pytest.approx(0.5 * (direct["nrmse_x"] + direct["nrmse_y"]))
+    direct = []
+    for trajectory in ("fixed", "random"):  # windows are chosen on both path modes
+        env_kwargs = {
+            "scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0, "trajectory": trajectory
+        }
+        unit = RunUnit(
+            "dgpt-rbcm", "agents.dgpt:DGPT", {"aggregation": "rbcm", "window": 6}, env_kwargs, 1000
+        )
+        metrics = run_unit(unit)["metrics"]
+        direct.append(0.5 * (metrics["nrmse_x"] + metrics["nrmse_y"]))
+    assert direct[0] != direct[1]
+    assert scores[6] == pytest.approx(np.mean(direct))
     path = tmp_path / "windows.json"
     tuning.save_tuned_windows(best, rows, path)
     assert json.loads(path.read_text())["windows"] == best
