@@ -8,6 +8,7 @@ step time; then a summary per candidate over the cells.
 
     python scripts/model_study.py                  # the built-in candidates
     python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
+    python scripts/model_study.py --clutter-sensors all --candidates se-trend se-gate-4
 """
 
 from __future__ import annotations
@@ -32,6 +33,10 @@ CANDIDATES = {
         "agents.dgpt:DGPT",
         {"window": 3, "mean": "zero", "hyperparameter_bounds": "loose"},
     ),
+    **{
+        f"se-gate-{threshold:g}": ("agents.dgpt:DGPT", {"window": 3, "gate_threshold": threshold})
+        for threshold in (3.0, 4.0, 5.0, 6.0)
+    },
     "ncv-local-bcm": (
         "agents.dgpt:DGPT",
         {"window": 4, "kernel": "ncv", "mean": "prediction", "aggregation": "bcm"},
@@ -61,6 +66,18 @@ def parse_args(argv):
     )
     parser.add_argument("--seeds", type=int, default=6, help="training seeds 1000 .. 1000+N-1")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--clutter-sensors",
+        choices=("detecting", "all"),
+        default="detecting",
+        help="which sensors report clutter (the environment's clutter_sensors)",
+    )
+    parser.add_argument(
+        "--trajectories", nargs="+", choices=TRAJECTORIES, default=list(TRAJECTORIES)
+    )
+    parser.add_argument(
+        "--clutter-rates", nargs="+", type=float, default=list(CLUTTER_RATES)
+    )
     return parser.parse_args(argv)
 
 
@@ -72,13 +89,14 @@ def main(argv=None) -> int:
     units, keys = [], []
     for name in args.candidates:
         entry_point, kwargs = CANDIDATES[name]
-        for cell in itertools.product(SCENARIOS, TRAJECTORIES, CLUTTER_RATES):
+        for cell in itertools.product(SCENARIOS, args.trajectories, args.clutter_rates):
             scenario, trajectory, clutter = cell
             env = {
                 "scenario": scenario,
                 "noise_std": 1.0,
                 "clutter_rate": clutter,
                 "trajectory": trajectory,
+                "clutter_sensors": args.clutter_sensors,
             }
             for seed in range(1000, 1000 + args.seeds):
                 units.append(RunUnit(name, entry_point, kwargs, env, seed))

@@ -212,3 +212,58 @@ def test_the_paper_model_reverts_to_the_raw_origin_the_default_follows_its_trend
     assert np.linalg.norm(finals["dgpt-rbcm-paper"][1]) < 1.0
     moved = finals["dgpt-rbcm"][1] - finals["dgpt-rbcm"][0]
     assert np.linalg.norm(moved) > 1000  # 300 s at 10-25 m/s along the trend
+
+
+def dense_rbcm_estimate(data, log_params):
+    """The step's estimate written out from the paper's formulas on the tracker's window
+    data: every expert's dense GP posterior at tau = 0 (eqs. (6)-(7), SE kernel on the
+    expert's own residuals), RBCM (eqs. (18)-(20)) over the experts, plus the trend and
+    its least-squares variance (R&W Sec. 2.7)."""
+    means, variances = np.zeros(2), np.zeros(2)
+    for axis in range(2):
+        signal, lengthscale, noise = np.exp(log_params[axis])
+        expert_mean, expert_var = [], []
+        for expert in range(data.mask.shape[0]):
+            keep = data.mask[expert]
+            t = data.X[axis, expert, keep, -1]
+            z = data.z[axis, expert, keep]
+            gram = signal * np.exp(-0.5 * (t[:, None] - t[None, :]) ** 2 / lengthscale**2)
+            cross = signal * np.exp(-0.5 * t**2 / lengthscale**2)
+            weights = np.linalg.solve(gram + noise * np.eye(t.size), cross)
+            expert_mean.append(weights @ z)
+            expert_var.append(signal - cross @ weights)
+        mu, var = np.array(expert_mean), np.array(expert_var)
+        if mu.size == 1:
+            mean, total_var = mu[0], var[0]
+        else:
+            beta = 0.5 * (np.log(signal) - np.log(var))
+            precision = np.sum(beta / var) + (1.0 - beta.sum()) / signal
+            total_var = 1.0 / precision
+            mean = total_var * np.sum(beta * mu / var)
+        c = data.trend_covariance
+        means[axis] = mean + data.intercept[axis]
+        variances[axis] = total_var + (signal + noise) * c[0, 0]
+    return means, variances
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_estimate_is_the_rbcm_of_the_experts_local_posteriors(seed):
+    """Catches experts that return their prior (the estimate would be the trend) and a
+    trend variance left out: every step's estimate must equal the dense formulas."""
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=1.0)
+    observation, info = env.reset(seed=seed)
+    tracker = DGPT(window=4)
+    tracker.reset(info["problem_spec"])
+    moved_by_experts = []
+    for _ in range(40):
+        estimate = tracker.update(observation)
+        data = tracker._data
+        if data is not None and data.sensors.size > 1:
+            mean, var = dense_rbcm_estimate(data, tracker.log_params_)
+            np.testing.assert_allclose(estimate.mean, mean, rtol=1e-9, atol=1e-7)
+            np.testing.assert_allclose(estimate.var, var, rtol=1e-7)
+            moved_by_experts.append(np.abs(mean - data.intercept).max())
+        observation, *_ = env.step(estimate.mean)
+    # the experts do move the estimate off the trend on these steps (by far more than the
+    # tolerance above), so a tracker whose experts returned their prior would fail
+    assert len(moved_by_experts) >= 10 and np.median(moved_by_experts) > 1e-3
