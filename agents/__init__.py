@@ -1,1 +1,1 @@
-"""The paper's trackers. :mod:`agents.base` holds the tracker interface."""
+"""The paper's trackers. :mod:`dgpt_gym.tracker` holds the tracker interface."""

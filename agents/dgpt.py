@@ -38,10 +38,10 @@ import numpy as np
 
 from agents import aggregation as agg
 from agents import gp
-from agents.base import Estimate, TrackerBase
 from agents.gating import gate_measurements
 from agents.window import PRIOR_MEANS, ExpertData, SlidingWindow, StepRecord, padded_size
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_bool, check_choice, check_integer, check_real
 
 __all__ = [

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Estimate, TrackerBase
 from agents.dgpt import DGPT
 from agents.likelihood import PoissonLikelihood
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_choice, check_real
 
 __all__ = ["HybridFilter", "paper_posterior", "exact_posterior", "GaussianSumPosterior", "VARIANTS"]

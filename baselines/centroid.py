@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Estimate, TrackerBase
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["GatedCentroidTracker", "weighted_centroid"]

@@ -1,5 +1,5 @@
 """Stone Soup trackers on DGPTrack-v0: a wrapper from Stone Soup components to this
-project's :class:`~agents.base.Tracker` interface (extra ``stonesoup``:
+project's :class:`~dgpt_gym.tracker.Tracker` interface (extra ``stonesoup``:
 ``pip install 'dgpt-gym[stonesoup]'``).
 
 :class:`StoneSoupTracker` runs a Stone Soup predictor, updater and hypothesiser. They come
@@ -28,7 +28,7 @@ Example (the KF-PDA of :func:`stonesoup_pda_tracker`, one episode of S2 at clutt
     import gymnasium
     import dgpt_gym  # registers DGPTrack-v0
     from baselines.stonesoup import stonesoup_pda_tracker
-    from dgpt_gym.evaluation import run_episode
+    from dgpt_gym.benchmark.episodes import run_episode
 
     tracker = stonesoup_pda_tracker(noise_diff_coeff=20.0, prob_detect=0.99)
     env = gymnasium.make("DGPTrack-v0", scenario="S2", clutter_rate=5)
@@ -66,8 +66,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agents.base import Estimate, TrackerBase
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_real
 
 try:
@@ -142,7 +142,7 @@ class _Components:
 
 
 class StoneSoupTracker(TrackerBase):
-    """Runs Stone Soup components through the :class:`~agents.base.Tracker` interface
+    """Runs Stone Soup components through the :class:`~dgpt_gym.tracker.Tracker` interface
     (module docstring).
 
     Args:

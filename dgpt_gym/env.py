@@ -15,6 +15,7 @@ from scipy import stats
 from dgpt_gym.measurements import CLUTTER_SENSORS, Scans, simulate_scans
 from dgpt_gym.network import SensorNetwork
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.rendering import Renderer
 from dgpt_gym.scenarios import Scenario, Trajectory, get_scenario
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
@@ -105,14 +106,14 @@ class DGPTrackEnv(gym.Env):
 
     Trackers must not read ``info``: it holds the truth. The evaluation loop hands it only
     to trackers that declare themselves oracles (``oracle = True``, e.g. the clairvoyant
-    accuracy floor; :func:`dgpt_gym.evaluation.run_episodes`).
+    accuracy floor; :func:`dgpt_gym.benchmark.episodes.run_episodes`).
 
     ## Arguments
 
     | argument | default | meaning |
     |---|---|---|
     | ``scenario`` | ``"S1"`` | ``"S1"`` .. ``"S4"`` or a :class:`~dgpt_gym.scenarios.Scenario` |
-    | ``noise_std`` | 1.0 | sigma_z of target measurements, m (the paper: 1, 2, 4) |
+    | ``noise_std`` | 1.0 | sigma_z of target measurements, m, >= 0 (the paper: 1, 2, 4; 0: exact target measurements) |
     | ``clutter_rate`` | 1.0 | lambda_c, clutter points per clutter-producing sensor per step (the paper: 1, 5) |
     | ``detection_rate`` | 1.0 | lambda_T, > 0 |
     | ``n_sensors`` | 250 | number of sensors |
@@ -194,6 +195,8 @@ class DGPTrackEnv(gym.Env):
         self.scans_: Scans | None = None
         self.step_: int | None = None
         self.estimates_: list[np.ndarray] = []
+        self.uncertainties_: list[tuple[np.ndarray, np.ndarray | None] | None] = []
+        self._annotation = None
         self._overflow_warned = False
         self._renderer = None
 
@@ -267,9 +270,26 @@ class DGPTrackEnv(gym.Env):
         info["problem_spec"] = self.problem_spec
         info["scenario"] = self.scenario
         self.estimates_ = []
+        self.uncertainties_ = []
+        self._annotation = None
         if self.render_mode == "human":
             self.render()
         return self._observation(0), info
+
+    def annotate(self, var, ucb=None) -> None:
+        """Attach the uncertainty of the estimate about to be passed to :meth:`step`: its
+        per-axis variance (m^2) and, where the tracker has one, its UCB half-width (m).
+        Only :meth:`render` uses it (a 3-sigma ellipse and the UCB box around the estimate);
+        the action stays the position alone. Call it before each ``step``, e.g.
+        ``env.unwrapped.annotate(estimate.var, estimate.ucb)``."""
+        var = np.asarray(var, dtype=float)
+        if var.shape != (2,) or not np.all(np.isfinite(var)) or np.any(var < 0):
+            raise ValueError(f"var must be two finite variances >= 0; got {var!r}")
+        if ucb is not None:
+            ucb = np.asarray(ucb, dtype=float)
+            if ucb.shape != (2,) or np.any(ucb < 0) or np.any(np.isnan(ucb)):
+                raise ValueError(f"ucb must be two half-widths >= 0 or None; got {ucb!r}")
+        self._annotation = (var, ucb)
 
     def step(self, action):
         if self.step_ is None:
@@ -296,6 +316,8 @@ class DGPTrackEnv(gym.Env):
         info = self._step_info(step)
         info["error"] = error
         self.estimates_.append(estimate)
+        self.uncertainties_.append(self._annotation)
+        self._annotation = None
         self.step_ = step + 1
         truncated = self.step_ == self.n_steps
         info.update(self._observation_truth(self.step_))
@@ -313,8 +335,6 @@ class DGPTrackEnv(gym.Env):
         if self.step_ is None:
             raise ResetNeeded("Cannot call env.render() before calling env.reset()")
         if self._renderer is None:
-            from dgpt_gym.rendering import Renderer
-
             self._renderer = Renderer(self)
         return self._renderer.render(self.render_mode)
 

@@ -1,9 +1,10 @@
 """Tracker registry, modelled on Gymnasium's env registry.
 
 Trackers are registered by id with an entry-point string ``"module:attribute"`` and default
-keyword arguments; :func:`make_tracker` imports the module only when a tracker is built, so
-``dgpt_gym`` has no static import of ``agents`` or ``baselines`` yet knows every tracker by
-name.
+keyword arguments; :func:`make_tracker` imports the module only when a tracker is built. The
+project's own ids are declared as data beside their code (:data:`BUILTIN_TRACKER_TABLES`) and
+read the first time the registry is asked for an id, so ``dgpt_gym`` has no import of
+``agents`` or ``baselines`` yet knows every tracker by name.
 
 Two ways in for a user's own tracker, besides :func:`register_tracker`:
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 
 __all__ = [
     "TrackerSpec",
@@ -28,10 +30,23 @@ __all__ = [
     "tracker_ids",
     "tracker_spec",
     "ENTRY_POINT_GROUP",
+    "BUILTIN_TRACKER_TABLES",
+    "load_table",
 ]
 
 ENTRY_POINT_GROUP = "dgpt_gym.trackers"
 """Entry-point group through which installed packages register tracker ids."""
+
+BUILTIN_TRACKER_TABLES = ("agents.registration:TRACKERS", "baselines.registration:TRACKERS")
+"""Where the project's trackers are declared: tuples ``(id, "module:Class", kwargs)``."""
+
+
+def load_table(location: str):
+    """The object at ``location`` (``"package.module:NAME"``), imported on demand: how
+    :mod:`dgpt_gym` reads the registration tables of the packages that build on it without
+    importing them."""
+    module_name, _, attribute = location.partition(":")
+    return getattr(importlib.import_module(module_name), attribute)
 
 
 @dataclass(frozen=True)
@@ -43,12 +58,11 @@ class TrackerSpec:
     kwargs: dict = field(default_factory=dict)
 
     def load(self):
-        module_name, _, attribute = self.entry_point.partition(":")
-        if not attribute:
+        if not self.entry_point.partition(":")[2]:
             raise ValueError(
                 f"entry_point must look like 'package.module:Class'; got {self.entry_point!r}"
             )
-        return getattr(importlib.import_module(module_name), attribute)
+        return load_table(self.entry_point)
 
 
 _REGISTRY: dict[str, TrackerSpec] = {}
@@ -63,18 +77,20 @@ def register_tracker(id: str, entry_point: str, **kwargs) -> None:
     _REGISTRY[id] = TrackerSpec(id, entry_point, dict(kwargs))
 
 
-_entry_points_loaded = False
+_tables_loaded = False
 
 
-def _load_entry_points() -> None:
-    """Register the ids that installed packages declare in :data:`ENTRY_POINT_GROUP` (once;
-    ids registered in code take precedence)."""
-    global _entry_points_loaded
-    if _entry_points_loaded:
+def _load_tables() -> None:
+    """Register the project's ids (:data:`BUILTIN_TRACKER_TABLES`) and those that installed
+    packages declare in :data:`ENTRY_POINT_GROUP` (once; ids registered by
+    :func:`register_tracker` take precedence)."""
+    global _tables_loaded
+    if _tables_loaded:
         return
-    _entry_points_loaded = True
-    from importlib.metadata import entry_points
-
+    _tables_loaded = True
+    for location in BUILTIN_TRACKER_TABLES:
+        for id, entry_point, kwargs in load_table(location):
+            _REGISTRY.setdefault(id, TrackerSpec(id, entry_point, dict(kwargs)))
     for point in entry_points(group=ENTRY_POINT_GROUP):
         if point.name not in _REGISTRY and ":" in point.value:
             _REGISTRY[point.name] = TrackerSpec(point.name, point.value)
@@ -82,7 +98,7 @@ def _load_entry_points() -> None:
 
 def tracker_ids() -> list[str]:
     """The registered tracker ids (with those of installed packages), sorted."""
-    _load_entry_points()
+    _load_tables()
     return sorted(_REGISTRY)
 
 
@@ -91,7 +107,7 @@ def tracker_spec(id: str) -> TrackerSpec:
     registered yet is registered as that class if it can be imported. ``ValueError``
     otherwise, listing the registered ids."""
     if isinstance(id, str) and id not in _REGISTRY:
-        _load_entry_points()
+        _load_tables()
         if id not in _REGISTRY and ":" in id:
             spec = TrackerSpec(id, id)
             try:

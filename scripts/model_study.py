@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dgpt_gym.sweep import RunUnit, run_units  # noqa: E402
+from dgpt_gym.benchmark.sweep import RunUnit, run_units  # noqa: E402
 
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),

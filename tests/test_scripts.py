@@ -1,11 +1,12 @@
 """The command-line scripts, run as a user runs them."""
 
-import importlib.util
 import os
 import re
 import subprocess
 import sys
 from pathlib import Path
+
+from dgpt_gym.benchmark.cli import with_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,15 +58,7 @@ def test_evaluate_help_documents_every_option():
         assert option in result.stdout
 
 
-def load_script(name):
-    spec = importlib.util.spec_from_file_location(name.removesuffix(".py"), ROOT / "scripts" / name)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_evaluate_inputs_expand_gp_trackers_and_keep_the_others():
-    with_inputs = load_script("evaluate.py").with_inputs
     assert with_inputs(["gp", "imm-pda", "dgpt-rbcm-stgp"], ["tgp", "stgp"]) == [
         "gp",
         "gp-stgp",

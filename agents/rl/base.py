@@ -30,6 +30,12 @@ class TrackerInsideEnv(gym.Env):
         )
         self._pending = None
 
+    def fixed_actions(self) -> tuple[dict[str, object], str]:
+        """The fixed baselines of this environment: ``{name: action}``, the grid in which the
+        best fixed setting is searched (:func:`agents.rl.evaluation.baseline_policies`), and
+        the name of the default one. Every RL environment defines its own."""
+        raise NotImplementedError(f"{type(self).__name__} defines no fixed baselines")
+
     def render(self):
         """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""
         return self.inner.render()

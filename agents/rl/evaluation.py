@@ -13,7 +13,9 @@ import gymnasium as gym
 import numpy as np
 from scipy import stats
 
-from dgpt_gym import metrics
+from agents.rl.base import TrackerInsideEnv
+from dgpt_gym.benchmark import metrics
+from dgpt_gym.benchmark.protocol import TRAINING_SEEDS
 
 __all__ = [
     "ConstantPolicy",
@@ -27,8 +29,6 @@ __all__ = [
     "EVALUATION_SEEDS",
 ]
 
-TRAINING_SEEDS = range(1000, 1005)
-"""Seeds of the grid search for the best fixed baseline (disjoint from evaluation)."""
 EVALUATION_SEEDS = range(0, 20)
 """Held-out seeds: no training episode uses them (training envs are seeded from 10_000)."""
 
@@ -66,38 +66,16 @@ class ModelPolicy:
 
 
 def baseline_policies(env: gym.Env) -> tuple[dict[str, object], str]:
-    """The fixed baselines of an RL environment: ``{name: policy}`` (the grid the best fixed
-    baseline is searched in) and the name of the default one.
-
-    - window: every candidate C; default C = 4, the DGPT tracker's default;
-    - gating: thresholds at actions -1, -0.75, ..., 1; default: no hard gate (the paper's
-      soft gating only, reached at the largest threshold, action 1);
-    - sensors: the nearest n candidates for n = 1..k; default: all k candidates on.
-    """
-    from agents.rl.sensors_env import DGPTrackSensorsEnv
-    from agents.rl.tuning_envs import DGPTrackGatingEnv, DGPTrackWindowEnv
-
+    """The fixed baselines of an RL environment as policies: ``{name: policy}`` (the grid the
+    best fixed baseline is searched in) and the name of the default one, from the
+    environment's ``fixed_actions()`` (:class:`agents.rl.base.TrackerInsideEnv`)."""
     inner = env.unwrapped
-    if isinstance(inner, DGPTrackWindowEnv):
-        policies = {f"fixed C={w}": ConstantPolicy(i) for i, w in enumerate(inner.windows)}
-        default = "fixed C=4" if "fixed C=4" in policies else next(iter(policies))
-        return policies, default
-    if isinstance(inner, DGPTrackGatingEnv):
-        policies = {}
-        for action in np.linspace(-1.0, 1.0, 9):
-            threshold = inner.threshold([action])
-            policies[f"fixed threshold {threshold:.3g}"] = ConstantPolicy(
-                np.array([action], dtype=np.float32)
-            )
-        return policies, list(policies)[-1]
-    if isinstance(inner, DGPTrackSensorsEnv):
-        k = inner.n_candidates
-        policies = {
-            f"nearest {n}": ConstantPolicy((np.arange(k) < n).astype(np.int8))
-            for n in range(1, k + 1)
-        }
-        return policies, f"nearest {k}"
-    raise ValueError(f"env must be one of the RL environments of agents.rl; got {type(inner)!r}")
+    if not isinstance(inner, TrackerInsideEnv):
+        raise ValueError(
+            f"env must be one of the RL environments of agents.rl; got {type(inner)!r}"
+        )
+    actions, default = inner.fixed_actions()
+    return {name: ConstantPolicy(action) for name, action in actions.items()}, default
 
 
 def run_policy_episode(env: gym.Env, policy, seed: int) -> dict[str, float]:

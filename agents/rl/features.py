@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Estimate
 from agents.dgpt import DGPT, HYPERPARAMETER_BOUNDS
+from dgpt_gym.tracker import Estimate
 
 __all__ = ["tracker_features", "FEATURE_NAMES", "FEATURE_HIGH"]
 

@@ -151,6 +151,12 @@ class DGPTrackSensorsEnv(TrackerInsideEnv):
         vector = np.r_[per_candidate.ravel(), tail]
         return np.clip(vector, -OBSERVATION_HIGH, OBSERVATION_HIGH).astype(np.float32)
 
+    def fixed_actions(self) -> tuple[dict[str, object], str]:
+        """The nearest n candidates for n = 1..k; the default is all k candidates on."""
+        k = self.n_candidates
+        actions = {f"nearest {n}": (np.arange(k) < n).astype(np.int8) for n in range(1, k + 1)}
+        return actions, f"nearest {k}"
+
     def step(self, action):
         self._check_started()
         bits = np.asarray(action).reshape(-1)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import inspect
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,11 +28,14 @@ from agents.rl.evaluation import (
     evaluate_policy_on_seeds,
     summarize_episodes,
 )
-from dgpt_gym.validation import check_choice, check_integer
+from agents.rl.registration import ENVIRONMENTS
+from dgpt_gym.benchmark.plots import new_figure, save_figure
+from dgpt_gym.validation import check_bool, check_choice, check_integer
 
 __all__ = [
     "ALGORITHMS",
     "RL_ENV_IDS",
+    "check_algo_kwargs",
     "TRAINING_ENV_SEED",
     "train_agent",
     "compare_with_baselines",
@@ -40,7 +44,7 @@ __all__ = [
     "load_agent",
 ]
 
-RL_ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0", "DGPTrackSensors-v0")
+RL_ENV_IDS = tuple(environment.id for environment in ENVIRONMENTS)
 ALGORITHMS = ("ppo", "a2c", "dqn")
 TRAINING_ENV_SEED = 10_000
 """Training environments are seeded from here: far from the evaluation seeds."""
@@ -50,6 +54,33 @@ def _algorithm_class(algo: str):
     import stable_baselines3
 
     return getattr(stable_baselines3, algo.upper())
+
+
+def check_algo_kwargs(algorithm, algo_kwargs: dict | None) -> dict:
+    """``algo_kwargs`` checked against the constructor of the SB3 ``algorithm``: every name
+    must be one of its parameters, and a value whose default is a number must be a number
+    (a bool where the default is a bool). ``ValueError`` naming the argument otherwise."""
+    algo_kwargs = dict(algo_kwargs or {})
+    parameters = inspect.signature(algorithm.__init__).parameters
+    taken = {"self", "policy", "env", "seed", "verbose", "tensorboard_log"}  # set by train_agent
+    allowed = sorted(n for n in parameters if n not in taken and not n.startswith("_"))
+    for name, value in algo_kwargs.items():
+        if name not in allowed:
+            raise ValueError(
+                f"algo_kwargs has {name!r}, which {algorithm.__name__} does not take; "
+                f"allowed: {allowed}"
+            )
+        default = parameters[name].default
+        if isinstance(default, bool):
+            check_bool(f"algo_kwargs[{name!r}]", value)
+        elif isinstance(default, (int, float)) and (
+            isinstance(value, bool) or not isinstance(value, (int, float))
+        ):
+            raise ValueError(
+                f"algo_kwargs[{name!r}] must be a number like its default {default!r}; "
+                f"got {value!r}"
+            )
+    return algo_kwargs
 
 
 def _progress_callback(total: int, enabled: bool):
@@ -126,15 +157,19 @@ def train_agent(
         monitor_dir=str(out / "monitor"),
     )
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
-    model = _algorithm_class(algo)(
-        "MlpPolicy",
-        venv,
-        seed=seed,
-        verbose=0,
-        tensorboard_log=tensorboard,
-        **(algo_kwargs or {}),
-    )
-    model.learn(total_timesteps=timesteps, callback=_progress_callback(timesteps, progress))
+    algorithm = _algorithm_class(algo)
+    algo_kwargs = check_algo_kwargs(algorithm, algo_kwargs)
+    try:
+        model = algorithm(
+            "MlpPolicy", venv, seed=seed, verbose=0, tensorboard_log=tensorboard, **algo_kwargs
+        )
+        # SB3 checks some values (n_steps, batch_size, schedules) only when it starts
+        model.learn(total_timesteps=timesteps, callback=_progress_callback(timesteps, progress))
+    except (AssertionError, TypeError, ValueError, RuntimeError) as error:
+        venv.close()
+        if not algo_kwargs:
+            raise
+        raise ValueError(f"algo_kwargs {algo_kwargs} rejected by {algorithm.__name__}: {error}") from None
     model_path = out / "model.zip"
     model.save(model_path)
     config = {
@@ -233,7 +268,6 @@ def monitor_returns(folder: Path) -> tuple[np.ndarray, np.ndarray]:
 def plot_learning_curve(out: str | Path, rows: list[dict] | None = None, title: str = "") -> Path:
     """Training episode returns against timesteps (Monitor logs in ``out/monitor``), a
     moving average, and the held-out mean return of the best fixed baseline if ``rows``."""
-    from dgpt_gym.plots import new_figure, save_figure
 
     out = Path(out)
     x, y = monitor_returns(out / "monitor")

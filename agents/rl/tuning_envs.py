@@ -191,6 +191,11 @@ class DGPTrackWindowEnv(TrackerTuningEnv):
         )
         self.action_space = spaces.Discrete(len(self.windows))
 
+    def fixed_actions(self) -> tuple[dict[str, object], str]:
+        """Every candidate C; the default is C = 4, the DGPT tracker's default."""
+        actions = {f"fixed C={w}": i for i, w in enumerate(self.windows)}
+        return actions, "fixed C=4" if "fixed C=4" in actions else next(iter(actions))
+
     def _apply_action(self, action) -> None:
         index = int(action)
         if not 0 <= index < len(self.windows):
@@ -283,6 +288,15 @@ class DGPTrackGatingEnv(TrackerTuningEnv):
             raise ValueError(f"action must be one finite number; got {action!r}")
         fraction = (np.clip(value[0], -1.0, 1.0) + 1.0) / 2.0
         return float(self.min_threshold * (self.max_threshold / self.min_threshold) ** fraction)
+
+    def fixed_actions(self) -> tuple[dict[str, object], str]:
+        """Thresholds at actions -1, -0.75, ..., 1; the default is no hard gate (the paper's
+        soft gating only, reached at the largest threshold, action 1)."""
+        actions = {
+            f"fixed threshold {self.threshold([a]):.3g}": np.array([a], dtype=np.float32)
+            for a in np.linspace(-1.0, 1.0, 9)
+        }
+        return actions, list(actions)[-1]
 
     def _apply_action(self, action) -> None:
         self.tracker.gate_threshold = self.threshold(action)

@@ -5,8 +5,8 @@ import pytest
 from conftest import z_tolerance
 from scipy import stats
 
-from dgpt_gym import metrics
-from dgpt_gym.evaluation import EpisodeResult, add_floor_ratios, summarize_runs
+from dgpt_gym.benchmark import metrics
+from dgpt_gym.benchmark.episodes import EpisodeResult, add_floor_ratios, summarize_runs
 
 TRUTH = np.array([[0.0, 10.0], [10.0, 10.0], [20.0, 30.0], [40.0, 50.0]])
 ESTIMATE = TRUTH + np.array([[1.0, -2.0], [-1.0, 0.0], [3.0, 2.0], [-3.0, 0.0]])

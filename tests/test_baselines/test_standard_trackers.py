@@ -1,13 +1,13 @@
 """The clairvoyant floor's motion models against the scenarios that draw the paths, and the
-standard trackers with noise-free measurements (tests/test_pda_clairvoyant.py has the rest)."""
+standard trackers with noise-free measurements (tests/test_baselines/test_pda_clairvoyant.py has the rest)."""
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from baselines.clairvoyant import ClairvoyantFilter, redrawn_velocity_moments, singer_model
-from dgpt_gym import make_tracker
-from dgpt_gym.evaluation import run_episode
+from dgpt_gym import make_tracker, tracker_ids
+from dgpt_gym.benchmark.episodes import run_episode
 
 
 def test_redrawn_velocity_moments_match_monte_carlo():
@@ -42,10 +42,11 @@ def test_singer_model_reproduces_the_scenario_recursion():
     np.testing.assert_allclose(q[:3, :3], sigma**2 * (1 - rho**2) * np.outer(gain, gain))
 
 
-@pytest.mark.parametrize("tracker_id", ["pda", "imm-pda", "clairvoyant"])
+@pytest.mark.parametrize("tracker_id", ["pda", "imm-pda", "clairvoyant", "cpf", "hybrid"])
 def test_noise_free_measurements_give_finite_estimates(tracker_id):
-    """noise_std = 0 is a valid env setting; the Kalman updates floor sigma_z instead of
-    dividing by zero (pytest turns the RuntimeWarning of a 0/0 into an error)."""
+    """noise_std = 0 is a valid env setting; the model-based trackers floor sigma_z
+    (ProblemSpec.model_noise_std) instead of dividing by zero (pytest turns the
+    RuntimeWarning of a 0/0 into an error)."""
     env = gym.make("DGPTrack-v0", scenario="S1", noise_std=0.0, clutter_rate=1.0)
     result = run_episode(env, make_tracker(tracker_id), seed=0)
     assert np.all(np.isfinite(result.mean)) and np.all(np.isfinite(result.var))
@@ -55,6 +56,15 @@ def test_noise_free_measurements_give_finite_estimates(tracker_id):
     sensed = result.n_detecting > 0
     errors = np.linalg.norm(result.mean[sensed] - result.truth[sensed], axis=1)
     assert np.median(errors) < 1e-3
+
+
+@pytest.mark.parametrize(
+    "tracker_id", [t for t in tracker_ids() if t not in ("pda", "imm-pda", "clairvoyant")]
+)
+def test_every_tracker_stays_finite_with_noise_free_measurements(tracker_id):
+    env = gym.make("DGPTrack-v0", scenario="S3", noise_std=0.0, clutter_rate=5.0)
+    result = run_episode(env, make_tracker(tracker_id), seed=1)
+    assert np.all(np.isfinite(result.mean)) and np.all(np.isfinite(result.var))
 
 
 def test_the_clairvoyant_singer_parameters_are_checked():

@@ -16,13 +16,21 @@ import json
 import os
 import time
 from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
+from threadpoolctl import threadpool_limits
+from tqdm.auto import tqdm
 
-from dgpt_gym.evaluation import run_episodes, summarize_runs
-from dgpt_gym.store import ResultsStore, run_key
+import dgpt_gym
+from dgpt_gym.benchmark.episodes import run_episodes, summarize_runs
+from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
+from dgpt_gym.benchmark.store import ResultsStore, run_key
+from dgpt_gym.benchmark.windows import tuned_kwargs
+from dgpt_gym.registry import TrackerSpec, tracker_spec
+from dgpt_gym.scenarios import get_scenario
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = [
@@ -39,29 +47,16 @@ __all__ = [
     "sweep_units",
     "QUICK_SWEEP",
     "PAPER_SWEEP",
-    "PAPER_GP_TRACKERS",
-    "PAPER_AS_PRINTED_TRACKERS",
     "STANDARD_TRACKERS",
 ]
+
+SCHEDULER_TIMEOUT_S = 5
+"""Seconds to wait for a Dask scheduler before giving up with a clear error."""
 
 DEFAULT_BATCH_SIZE = 50
 """Runs per lockstep block (measured, DGPT-RBCM-STGP on S3: 0.079, 0.062, 0.058 and 0.049 s
 per episode in blocks of 10, 25, 50 and 100, against 0.25 s alone)."""
 
-PAPER_GP_TRACKERS = (
-    "gp",
-    "gp-stgp",
-    "dgpt-rbcm",
-    "dgpt-rbcm-stgp",
-    "dgpt-gpoe",
-    "dgpt-gpoe-stgp",
-)
-"""The approaches of the paper's Tables II-IX: standard GP, DGPT-RBCM, DGPT-GPoE, each
-with temporal (TGP) and spatio-temporal (STGP) inputs."""
-
-PAPER_AS_PRINTED_TRACKERS = tuple(f"{tracker}-paper" for tracker in PAPER_GP_TRACKERS)
-"""The same approaches with the paper's model as printed (zero prior mean on raw
-coordinates; ``PAPER_MODEL`` in :mod:`dgpt_gym`), to set beside our defaults."""
 
 
 @dataclass(frozen=True)
@@ -91,7 +86,7 @@ class Grid:
     """Every tracker on every (scenario, noise_std, clutter_rate) cell, seeds
     ``first_seed .. first_seed + runs - 1`` (the same seeds give every tracker the same
     measurements). With ``tuned_windows`` the GP trackers use the window tuned for the
-    scenario (:mod:`dgpt_gym.tuning`)."""
+    scenario (:mod:`dgpt_gym.benchmark.tuning`)."""
 
     trackers: tuple[str, ...]
     scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4")
@@ -102,9 +97,6 @@ class Grid:
     tuned_windows: bool = True
 
     def __post_init__(self) -> None:
-        from dgpt_gym.registry import tracker_spec
-        from dgpt_gym.scenarios import get_scenario
-
         for name in ("trackers", "scenarios", "noise_levels", "clutter_rates"):
             if not isinstance(getattr(self, name), Sequence) or not getattr(self, name):
                 raise ValueError(
@@ -115,16 +107,13 @@ class Grid:
         for scenario in self.scenarios:
             get_scenario(scenario)
         for noise in self.noise_levels:
-            check_real("noise_std", noise, low=0.0, low_inclusive=False)
+            check_real("noise_std", noise, low=0.0)
         for clutter in self.clutter_rates:
             check_real("clutter_rate", clutter, low=0.0)
         check_integer("runs", self.runs, low=1)
         check_integer("first_seed", self.first_seed, low=0)
 
     def units(self) -> list[RunUnit]:
-        from dgpt_gym.registry import tracker_spec
-        from dgpt_gym.tuning import tuned_kwargs
-
         units = []
         for scenario in self.scenarios:
             for noise in self.noise_levels:
@@ -178,7 +167,6 @@ def _single_threaded_blas() -> None:
     """Worker initializer: one BLAS thread per process. The GP matrices are tiny, and
     several processes each running a multi-threaded BLAS on the same cores spin against
     each other (measured: 2 workers ran 5x slower than 1 without this)."""
-    from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1)
 
@@ -202,12 +190,11 @@ def run_unit(unit: RunUnit) -> dict:
 
 def run_block(units: Sequence[RunUnit]) -> list[dict]:
     """Run the episodes of ``units``, which share tracker and environment settings
-    (:func:`make_blocks`), in lockstep (:func:`dgpt_gym.evaluation.run_episodes`); never
+    (:func:`make_blocks`), in lockstep (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never
     raises. One outcome per unit as in :func:`run_unit`; ``runtime_s`` is the block's wall
     time divided by its size. If the block raises, each unit is run alone, so one failing
     run is recorded as failed and the others as they would be anyway (a run's numbers do
     not depend on its block)."""
-    from dgpt_gym.registry import TrackerSpec
 
     started = time.perf_counter()
     envs = []
@@ -276,8 +263,7 @@ def run_units(
 ) -> list[dict]:
     """:func:`run_unit` of every unit, in order, on ``workers`` local processes in blocks of
     ``batch_size``, without a store (for short searches such as
-    :func:`dgpt_gym.tuning.tune_windows`)."""
-    from tqdm.auto import tqdm
+    :func:`dgpt_gym.benchmark.tuning.tune_windows`)."""
 
     index = {id(unit): i for i, unit in enumerate(units)}
     outcomes: list[dict] = [{}] * len(units)
@@ -295,7 +281,6 @@ def _local_results(blocks: list[tuple[RunUnit, ...]], workers: int):
         for block in blocks:
             yield block, run_block(block)
         return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas)
     try:
@@ -314,7 +299,14 @@ def _dask_results(blocks: list[tuple[RunUnit, ...]], scheduler: str):
         raise ImportError(
             "--scheduler needs dask.distributed: pip install 'dgpt-gym[cluster]'"
         ) from error
-    with Client(scheduler) as client:
+    try:
+        client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError, TypeError) as error:
+        raise ValueError(
+            f"scheduler {scheduler!r} cannot be reached within {SCHEDULER_TIMEOUT_S} s "
+            f"(expected the address of a running Dask scheduler, e.g. tcp://host:8786): {error}"
+        ) from None
+    with client:
         client.run(_single_threaded_blas)
         futures = client.map(run_block, blocks, pure=False)
         owner = {future.key: block for future, block in zip(futures, blocks)}
@@ -354,17 +346,15 @@ def run_sweep(
             (:func:`make_blocks`); a run's numbers do not depend on it, only the speed
             and how much an interruption loses (the blocks in flight).
     """
-    from tqdm.auto import tqdm
 
     units = sweep_units(grids)
     if workers is None:
         workers = os.cpu_count() or 1
     check_integer("workers", workers, low=1)
     failed, errors = 0, []
-    from dgpt_gym import __version__
 
     with ResultsStore(out) as store:
-        finished = store.finished_keys(__version__)  # another version's rows are re-run
+        finished = store.finished_keys(dgpt_gym.__version__)  # another version's rows are re-run
         todo = [unit for unit in units if unit.key not in finished]
         blocks = make_blocks(todo, batch_size)
         results = _dask_results(blocks, scheduler) if scheduler else _local_results(blocks, workers)

@@ -8,7 +8,7 @@ from scipy import stats
 from agents.dgpt import DGPT
 from baselines.standard_gp import StandardGP
 from dgpt_gym import make_tracker
-from dgpt_gym.evaluation import run_episode
+from dgpt_gym.benchmark.episodes import run_episode
 
 
 def episode(tracker, scenario="S1", seed=0, **env_kwargs):
@@ -138,7 +138,7 @@ def test_lockstep_batch_equals_each_episode_alone():
     """Different trackers (distributed and pooled, TGP and STGP, another window, the hard
     gate, the anytime UCB) and seeds stepped together by ``run_episodes`` give bit for bit
     the estimates, variances and UCBs of each episode run alone."""
-    from dgpt_gym.evaluation import run_episodes
+    from dgpt_gym.benchmark.episodes import run_episodes
 
     settings = [
         ("dgpt-rbcm", {}, 0),
@@ -191,7 +191,6 @@ def test_the_paper_model_reverts_to_the_raw_origin_the_default_follows_its_trend
     constant-velocity trend carries it on along the track."""
     import gymnasium as gym
 
-    import dgpt_gym
     from dgpt_gym.registry import make_tracker
 
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)

@@ -28,7 +28,6 @@ from stonesoup.types.track import Track  # noqa: E402
 from stonesoup.updater.kalman import KalmanUpdater  # noqa: E402
 from stonesoup.updater.probability import PDAUpdater  # noqa: E402
 
-from agents.base import Estimate  # noqa: E402
 from baselines.kalman import (  # noqa: E402
     POSITION_MATRIX,
     constant_velocity_model,
@@ -37,6 +36,7 @@ from baselines.kalman import (  # noqa: E402
     pda_update,
 )
 from dgpt_gym.problem import ProblemSpec  # noqa: E402
+from dgpt_gym.tracker import Estimate  # noqa: E402
 
 START = datetime.datetime(2026, 1, 1)
 TOLERANCE = {"rtol": 1e-9, "atol": 1e-9}
@@ -392,7 +392,7 @@ def test_stonesoup_pda_tracker_tracks_an_s1_episode():
     import gymnasium as gym
 
     from baselines.stonesoup import stonesoup_pda_tracker
-    from dgpt_gym.evaluation import run_episode
+    from dgpt_gym.benchmark.episodes import run_episode
 
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
     result = run_episode(env, stonesoup_pda_tracker(), seed=0)
@@ -458,7 +458,7 @@ def test_wrapped_stonesoup_tracker_runs_an_episode():
     import gymnasium as gym
 
     from dgpt_gym import make_tracker
-    from dgpt_gym.evaluation import run_episode
+    from dgpt_gym.benchmark.episodes import run_episode
 
     result = run_episode(
         gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0), make_tracker("stonesoup-pda"), 0

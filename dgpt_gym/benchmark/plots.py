@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
 
+from dgpt_gym.benchmark.metrics import CI_SIGMAS
 from dgpt_gym.network import SensorNetwork
 from dgpt_gym.scenarios import SCENARIOS
 
@@ -14,6 +16,7 @@ __all__ = [
     "save_figure",
     "plot_scenarios",
     "plot_ucb_vs_ci",
+    "plot_error_against_time",
     "plot_training_time",
     "read_training_time",
 ]
@@ -67,12 +70,10 @@ def plot_scenarios(path: str | Path, layout_seed: int = 0, n_random: int = 3) ->
 
 
 def plot_ucb_vs_ci(result, path: str | Path, title: str) -> Path:
-    """The paper's Figs. 4-7 for one episode (a :class:`dgpt_gym.evaluation.EpisodeResult`
+    """The paper's Figs. 4-7 for one episode (a :class:`dgpt_gym.benchmark.episodes.EpisodeResult`
     of a tracker with a UCB): per axis (rows), the true coordinate, the estimate and the band
     estimate +- UCB half-width (left) or +- 3 sigma (right), with the share of steps whose
     band covers the truth."""
-    from dgpt_gym.metrics import CI_SIGMAS
-
     figure = new_figure((11, 6.5))
     steps = np.arange(result.truth.shape[0])
     bands = [
@@ -99,9 +100,39 @@ def plot_ucb_vs_ci(result, path: str | Path, title: str) -> Path:
     return save_figure(figure, path)
 
 
+def plot_error_against_time(
+    curves: dict[str, dict[str, np.ndarray]], path: str | Path, settings: str = ""
+) -> Path:
+    """2-D error against time step, one panel per scenario: for every tracker the median over
+    runs and the band between the 25th and 75th percentiles (``curves``: ``{scenario:
+    {tracker: (runs, steps) errors}}``, :func:`dgpt_gym.benchmark.outputs.error_curves`).
+    The error axis is logarithmic: gaps cost tens of metres, sensed steps a few."""
+    scenarios = list(curves)
+    columns = min(2, len(scenarios))
+    rows = -(-len(scenarios) // columns)
+    figure = new_figure((5.5 * columns, 3.4 * rows))
+    colours = {}
+    for index, scenario in enumerate(scenarios):
+        axes = figure.add_subplot(rows, columns, index + 1)
+        for tracker, errors in curves[scenario].items():
+            colour = colours.setdefault(tracker, f"C{len(colours)}")
+            steps = np.arange(errors.shape[1])
+            low, median, high = np.percentile(errors, [25, 50, 75], axis=0)
+            axes.fill_between(steps, low, high, color=colour, alpha=0.2, lw=0)
+            axes.plot(steps, median, c=colour, lw=1.0, label=f"{tracker} ({errors.shape[0]} runs)")
+        axes.set_yscale("log")
+        axes.set_title(scenario, fontsize=9)
+        axes.set_xlabel("step (s)", fontsize=8)
+        axes.set_ylabel("2-D error (m)", fontsize=8)
+        axes.tick_params(labelsize=7)
+        axes.legend(fontsize=6, loc="upper left")
+    title = "Error against time: median and interquartile band over runs"
+    figure.suptitle(f"{title}, {settings}" if settings else title, fontsize=10)
+    return save_figure(figure, path)
+
+
 def read_training_time(path: str | Path) -> list[dict]:
     """Rows (N, M, seconds) of the training-time benchmark CSV (``scripts/bench.py``)."""
-    import csv
 
     with Path(path).open() as handle:
         return [

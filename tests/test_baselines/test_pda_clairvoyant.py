@@ -26,10 +26,11 @@ from baselines.kalman import (
     pda_update,
 )
 from baselines.pda import IMMPDAFilter, PDAFilter
-from dgpt_gym import make_tracker, metrics, tracker_ids
-from dgpt_gym.evaluation import run_episode, run_episodes, run_monte_carlo
+from dgpt_gym import make_tracker, tracker_ids
+from dgpt_gym.benchmark import metrics
+from dgpt_gym.benchmark.episodes import run_episode, run_episodes, run_monte_carlo
+from dgpt_gym.benchmark.windows import tuned_kwargs
 from dgpt_gym.problem import ProblemSpec
-from dgpt_gym.tuning import tuned_kwargs
 
 H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 K_ROWS = 8  # padding size of the hand-built observations

@@ -119,5 +119,5 @@ def test_the_usage_guide_quotes_the_current_scenario_parameters():
 
     from dgpt_gym.scenarios import scenario_table_markdown
 
-    guide = (Path(__file__).resolve().parents[1] / "docs" / "usage.md").read_text()
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "usage.md").read_text()
     assert scenario_table_markdown() in guide

@@ -14,13 +14,13 @@ import pytest
 from flaky_tracker import FAILING_SEED
 
 from dgpt_gym import make_tracker, register_tracker
-from dgpt_gym.evaluation import run_episode
-from dgpt_gym.outputs import write_outputs
-from dgpt_gym.store import DATABASE_NAME, ResultsStore
-from dgpt_gym.sweep import Grid, run_sweep, summarize_store, sweep_units
-from dgpt_gym.tuning import tuned_kwargs
+from dgpt_gym.benchmark.episodes import run_episode
+from dgpt_gym.benchmark.outputs import write_outputs
+from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore
+from dgpt_gym.benchmark.sweep import Grid, run_sweep, summarize_store, sweep_units
+from dgpt_gym.benchmark.windows import tuned_kwargs
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 DETERMINISTIC = ("step_time_ms",)  # wall-clock: the one metric that varies between runs
 
 

@@ -8,7 +8,7 @@ from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
 from agents.likelihood import PoissonLikelihood
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
 from dgpt_gym import make_tracker
-from dgpt_gym.evaluation import run_episode
+from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.problem import ProblemSpec
 
 LIKELIHOOD = PoissonLikelihood(
@@ -125,7 +125,7 @@ def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
 def test_hybrid_filters_in_lockstep_equal_each_alone():
     """Both variants, TGP and STGP (whose next-step prediction is recomputed from the
     posterior), stepped together: bit for bit the estimates of each episode alone."""
-    from dgpt_gym.evaluation import run_episodes
+    from dgpt_gym.benchmark.episodes import run_episodes
 
     settings = [("hybrid", {}, 0), ("hybrid-paper", {}, 1), ("hybrid", {"inputs": "stgp"}, 2)]
 
@@ -313,3 +313,22 @@ def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound():
             moved += len(measurements) > 0 and not np.allclose(estimate.mean, prior[0])
         obs, *_ = env.step(estimate.mean)
     assert moved > 20  # the update moved the prior on most steps with measurements
+
+
+def test_the_likelihood_of_a_heavy_scan_is_summed_in_chunks(monkeypatch, rng):
+    """A scan too large for one (positions x measurements) array is evaluated in chunks
+    of measurements; the log likelihood equals eq. (42) summed densely, and the CPF's
+    track-loss check sees the same closest pair."""
+    from agents import likelihood as likelihood_module
+    from agents.likelihood import PoissonLikelihood, measurement_chunks
+
+    model = PoissonLikelihood(clutter_rate=5.0, detection_rate=2.0, noise_std=3.0, sensing_area=7854.0)
+    positions = rng.uniform(0, 100, (7, 2))
+    measurements = rng.uniform(0, 100, (23, 2))
+    squared = ((positions[:, None, :] - measurements[None, :, :]) ** 2).sum(axis=2)
+    dense = np.log(
+        5.0 / 7854.0 + 2.0 / (2 * np.pi * 9.0) * np.exp(-0.5 * squared / 9.0)
+    ).sum(axis=1)
+    monkeypatch.setattr(likelihood_module, "CHUNK_ELEMENTS", 7 * 4)  # 4 measurements a chunk
+    assert len(measurement_chunks(7, 23)) == 6
+    np.testing.assert_allclose(model.log_likelihood(positions, measurements), dense, rtol=1e-12)

@@ -9,29 +9,27 @@ from __future__ import annotations
 
 import csv
 import functools
+import json
 from pathlib import Path
 
 import numpy as np
+
+from dgpt_gym.benchmark.plots import new_figure, save_figure
+from dgpt_gym.benchmark.protocol import PAPER_APPROACHES, TRAINING_SEEDS
+from dgpt_gym.benchmark.windows import TUNED_WINDOWS_PATH
+from dgpt_gym.naming import PAPER_SUFFIX, split_tracker_id, tracker_id
 
 __all__ = [
     "PAPER_NRMSE_PATH",
     "paper_nrmse",
     "paper_value",
-    "tracker_id",
     "paper_table_markdown",
     "summary_against_paper",
     "write_paper_tables",
-    "APPROACHES",
-    "PAPER_SUFFIX",
 ]
 
 PAPER_NRMSE_PATH = Path(__file__).with_name("data") / "paper_nrmse.csv"
-APPROACHES = ("gp", "dgpt-rbcm", "dgpt-gpoe")
 APPROACH_NAMES = {"gp": "Standard GP", "dgpt-rbcm": "DGPT-RBCM", "dgpt-gpoe": "DGPT-GPoE"}
-
-
-PAPER_SUFFIX = "-paper"
-"""Tracker ids with the paper's GP model as printed end in this."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -53,19 +51,10 @@ def paper_nrmse() -> dict[tuple, tuple[float, str]]:
     return table
 
 
-def tracker_id(approach: str, inputs: str, suffix: str = "") -> str:
-    """The registered tracker of a paper approach: ``gp`` / ``dgpt-rbcm`` / ``dgpt-gpoe``
-    with ``-stgp`` appended for spatio-temporal inputs, then ``suffix`` (``"-paper"`` for
-    the model as printed)."""
-    return (approach if inputs == "tgp" else f"{approach}-stgp") + suffix
-
-
 def paper_value(row: dict, axis: str) -> float | None:
     """The paper's NRMSE (%) for a per-cell summary ``row`` and ``axis``, or None where the
     paper has no such cell (other trackers, noise levels or clutter rates)."""
-    tracker = row["tracker"].removesuffix(PAPER_SUFFIX)
-    inputs = "stgp" if tracker.endswith("-stgp") else "tgp"
-    approach = tracker.removesuffix("-stgp")
+    approach, inputs, _ = split_tracker_id(row["tracker"])
     reference = paper_nrmse().get(
         (inputs, row["scenario"], row["noise_std"], row["clutter_rate"], approach, axis)
     )
@@ -73,13 +62,13 @@ def paper_value(row: dict, axis: str) -> float | None:
 
 
 def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: str = "") -> str:
-    """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store`);
+    """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.benchmark.sweep.summarize_store`);
     ``suffix="-paper"`` tabulates the trackers with the paper's model as printed."""
     ours = {
         (r["tracker"], r["noise_std"], r["clutter_rate"]): r
         for r in rows
         if r["scenario"] == scenario
-        and r["tracker"] in {tracker_id(a, inputs, suffix) for a in APPROACHES}
+        and r["tracker"] in {tracker_id(a, inputs, suffix) for a in PAPER_APPROACHES}
     }
     if not ours:
         return ""
@@ -88,7 +77,7 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: s
     noise_levels = sorted({key[1] for key in ours})
     clutter_rates = sorted({key[2] for key in ours})
     header = ["noise std (m)", "clutter rate"] + [
-        f"{APPROACH_NAMES[a]} {axis.upper()}" for a in APPROACHES for axis in "xy"
+        f"{APPROACH_NAMES[a]} {axis.upper()}" for a in PAPER_APPROACHES for axis in "xy"
     ]
     model = ", the paper's model as printed" if suffix else ""
     lines = [
@@ -100,7 +89,7 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: s
     for noise in noise_levels:
         for clutter in clutter_rates:
             cells = [f"{noise:g}", f"{clutter:g}"]
-            for approach in APPROACHES:
+            for approach in PAPER_APPROACHES:
                 row = ours.get((tracker_id(approach, inputs, suffix), noise, clutter))
                 for axis in "xy":
                     reference = paper.get((inputs, scenario, noise, clutter, approach, axis))
@@ -126,7 +115,7 @@ def summary_against_paper(rows: list[dict], suffix: str = "") -> dict[str, float
     ours, theirs = [], []
     for row in rows:
         for inputs in ("tgp", "stgp"):
-            for approach in APPROACHES:
+            for approach in PAPER_APPROACHES:
                 if row["tracker"] != tracker_id(approach, inputs, suffix):
                     continue
                 for axis in "xy":
@@ -160,7 +149,7 @@ def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None
         "## NRMSE beside the paper's Tables II-IX",
         "",
         f"Command: `{command}` ({', '.join(map(str, runs))} Monte Carlo runs per cell, seeds from 0;"
-        " window lengths tuned per scenario on training seeds, `dgpt_gym/tuned_windows.json`).",
+        " window lengths tuned per scenario on training seeds, `dgpt_gym/benchmark/tuned_windows.json`).",
         "",
         f"Summary: {summary['at_or_below_paper']} of {summary['cells']} cells at or below the paper's value;"
         f" mean NRMSE {summary['mean_ours']:.2f} % (paper {summary['mean_paper']:.2f} %).",
@@ -194,11 +183,9 @@ def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None
 
 def windows_markdown() -> list[str]:
     """The tuned window lengths and the grid-search scores they were chosen by."""
-    from dgpt_gym.tuning import TRAINING_SEEDS, TUNED_WINDOWS_PATH
 
     if not TUNED_WINDOWS_PATH.exists():
         return []
-    import json
 
     stored = json.loads(TUNED_WINDOWS_PATH.read_text())
     grid = stored["grid"]
@@ -271,7 +258,6 @@ def hybrid_comparison_markdown(rows: list[dict], command: str) -> str:
 
 def plot_hybrid_comparison(rows: list[dict], path: str | Path) -> Path:
     """Bar charts of NRMSE and STD of RMSE per scenario, axis and tracker (paper Fig. 8)."""
-    from dgpt_gym.plots import new_figure, save_figure
 
     trackers, scenarios, by_key = _comparison_layout(rows)
     figure = new_figure((10, 6))

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from dgpt_gym import report, tuning
-from dgpt_gym.sweep import Grid, RunUnit, run_unit, run_units
+from dgpt_gym.benchmark import report, tuning, windows
+from dgpt_gym.benchmark.sweep import Grid, RunUnit, run_unit, run_units
 
 
 def test_paper_values_are_transcribed():
@@ -63,10 +63,10 @@ def test_the_paper_model_as_printed_gets_its_own_tables():
 
 
 def test_tuned_windows_lookup():
-    windows = tuning.tuned_windows()
-    assert set(windows) >= {"gp", "dgpt-rbcm", "dgpt-gpoe"}
-    assert tuning.tuned_kwargs("dgpt-rbcm", "S2") == {"window": windows["dgpt-rbcm"]["S2"]}
-    assert tuning.tuned_kwargs("centroid", "S2") == {}
+    tuned = windows.tuned_windows()
+    assert set(tuned) >= {"gp", "dgpt-rbcm", "dgpt-gpoe"}
+    assert windows.tuned_kwargs("dgpt-rbcm", "S2") == {"window": tuned["dgpt-rbcm"]["S2"]}
+    assert windows.tuned_kwargs("centroid", "S2") == {}
 
 
 def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
@@ -88,7 +88,7 @@ def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
     assert direct[0] != direct[1]
     assert scores[6] == pytest.approx(np.mean(direct))
     path = tmp_path / "windows.json"
-    tuning.save_tuned_windows(best, rows, path)
+    windows.save_tuned_windows(best, rows, path)
     assert json.loads(path.read_text())["windows"] == best
 
 
@@ -103,7 +103,7 @@ def test_units_on_two_processes_equal_one():
             [a["metrics"]["nrmse_x"], a["metrics"]["nrmse_y"]],
             [b["metrics"]["nrmse_x"], b["metrics"]["nrmse_y"]],
         )
-    assert units[0].tracker_kwargs["window"] == tuning.tuned_windows()["dgpt-gpoe"]["S4"]
+    assert units[0].tracker_kwargs["window"] == windows.tuned_windows()["dgpt-gpoe"]["S4"]
 
 
 def test_hybrid_comparison_table_and_figure(tmp_path):
@@ -128,3 +128,31 @@ def test_hybrid_comparison_table_and_figure(tmp_path):
     assert text.index("| hybrid |") < text.index("| cpf |")
     figure = report.plot_hybrid_comparison(rows, tmp_path / "figures" / "comparison.png")
     assert figure.exists() and figure.stat().st_size > 1000
+
+
+def test_error_curves_are_the_per_step_errors_of_the_sweeps_runs(tmp_path):
+    import gymnasium as gym
+
+    from dgpt_gym import make_tracker
+    from dgpt_gym.benchmark.episodes import run_episode
+    from dgpt_gym.benchmark.outputs import error_curves
+    from dgpt_gym.benchmark.plots import plot_error_against_time
+    from dgpt_gym.benchmark.sweep import sweep_units
+
+    grid = Grid(
+        trackers=("imm-pda", "centroid"),
+        scenarios=("S4",),
+        clutter_rates=(1.0, 5.0),
+        runs=2,
+        tuned_windows=False,
+    )
+    curves, settings = error_curves(sweep_units([grid]))
+    assert list(curves) == ["S4"] and list(curves["S4"]) == ["imm-pda"]  # centroid not drawn
+    assert settings == "sigma_z 1 m, clutter rate 5"
+    env = gym.make("DGPTrack-v0", scenario="S4", clutter_rate=5.0)
+    alone = run_episode(env, make_tracker("imm-pda"), seed=1)
+    np.testing.assert_allclose(
+        curves["S4"]["imm-pda"][1], np.linalg.norm(alone.mean - alone.truth, axis=1)
+    )
+    path = plot_error_against_time(curves, tmp_path / "error.png", settings)
+    assert path.stat().st_size > 1000

@@ -5,53 +5,31 @@ sliding windows in different trajectories are carefully tuned").
 the evaluation seeds 0 onwards) at sigma_z = 1 and both clutter rates, and picks for every
 tracker and scenario the window with the lowest NRMSE averaged over axes, clutter rates and
 seeds. The result is stored in ``tuned_windows.json`` beside this module and used by
-:mod:`dgpt_gym.sweep`. Regenerate it with
+:mod:`dgpt_gym.benchmark.sweep`. Regenerate it with
 ``python scripts/evaluate.py --tune-windows``.
 """
 
 from __future__ import annotations
 
-import functools
 import json
 from collections.abc import Iterable
-from pathlib import Path
 
 import numpy as np
 
+from dgpt_gym.benchmark.protocol import TRAINING_SEEDS
+from dgpt_gym.benchmark.sweep import RunUnit, run_units
+from dgpt_gym.registry import tracker_spec
+
 __all__ = [
-    "TUNED_WINDOWS_PATH",
-    "TRAINING_SEEDS",
-    "tuned_windows",
-    "tuned_kwargs",
+    "WINDOW_GRID",
     "tune_windows",
-    "save_tuned_windows",
     "grid_search",
     "BASELINE_CANDIDATES",
     "baseline_tuning_markdown",
 ]
 
-TUNED_WINDOWS_PATH = Path(__file__).with_name("tuned_windows.json")
-TRAINING_SEEDS = range(1000, 1005)
 WINDOW_GRID = (2, 3, 4, 5, 6, 8)
-
-
-@functools.lru_cache(maxsize=1)
-def tuned_windows() -> dict[str, dict[str, int]]:
-    """``{tracker id: {scenario: window}}`` from ``tuned_windows.json`` (empty if absent)."""
-    if not TUNED_WINDOWS_PATH.exists():
-        return {}
-    return json.loads(TUNED_WINDOWS_PATH.read_text())["windows"]
-
-
-WINDOW_SOURCES = {"hybrid": "dgpt-rbcm", "hybrid-paper": "dgpt-rbcm"}
-"""Trackers that wrap a DGPT use the window tuned for it."""
-
-
-def tuned_kwargs(tracker_id: str, scenario: str) -> dict:
-    """``{"window": C}`` for a tracker with a tuned window on ``scenario``, else ``{}``."""
-    source = WINDOW_SOURCES.get(tracker_id, tracker_id)
-    window = tuned_windows().get(source, {}).get(scenario)
-    return {} if window is None else {"window": int(window)}
+"""Window lengths the search tries."""
 
 
 def tune_windows(
@@ -68,8 +46,6 @@ def tune_windows(
     """Grid search of the window length on the scenarios' reference paths and on random
     paths (a window must not be fitted to four paths); returns the best windows and every
     grid row (tracker, scenario, window, mean NRMSE)."""
-    from dgpt_gym.registry import tracker_spec
-    from dgpt_gym.sweep import RunUnit, run_units
 
     tracker_ids, scenarios = list(tracker_ids), list(scenarios)
     windows, seeds, clutter_rates = list(windows), list(seeds), list(clutter_rates)
@@ -156,8 +132,6 @@ def grid_search(
     (over axes, clutter rates, path modes and seeds) and the mean 2-D RMSE, and a row with
     scenario ``"all"`` averaging the scenarios. The model-based baselines take the
     candidate with the lowest ``"all"`` NRMSE as their one documented setting."""
-    from dgpt_gym.registry import tracker_spec
-    from dgpt_gym.sweep import RunUnit, run_units
 
     spec = tracker_spec(tracker_id)
     candidates, scenarios = [dict(c) for c in candidates], list(scenarios)
@@ -212,14 +186,6 @@ def grid_search(
             }
         )
     return rows
-
-
-def save_tuned_windows(
-    best: dict[str, dict[str, int]], rows: list[dict], path: Path = TUNED_WINDOWS_PATH
-) -> None:
-    """Write the tuned windows and the grid they came from."""
-    path.write_text(json.dumps({"windows": best, "grid": rows}, indent=1) + "\n")
-    tuned_windows.cache_clear()
 
 
 def baseline_tuning_markdown(results: dict[str, list[dict]], command: str) -> str:

@@ -4,7 +4,7 @@ import pytest
 
 from baselines.centroid import GatedCentroidTracker, weighted_centroid
 from dgpt_gym import make_tracker, register_tracker, tracker_ids
-from dgpt_gym.evaluation import run_episode, run_monte_carlo, summarize_runs
+from dgpt_gym.benchmark.episodes import run_episode, run_monte_carlo, summarize_runs
 
 
 @pytest.mark.parametrize("scenario", ["S1", "S2", "S3", "S4"])
@@ -158,11 +158,11 @@ def test_installed_packages_register_trackers_through_entry_points(monkeypatch):
         group=registry.ENTRY_POINT_GROUP,
     )
     monkeypatch.setattr(
-        importlib.metadata,
+        registry,
         "entry_points",
         lambda group=None: [point] if group == registry.ENTRY_POINT_GROUP else [],
     )
-    monkeypatch.setattr(registry, "_entry_points_loaded", False)
+    monkeypatch.setattr(registry, "_tables_loaded", False)
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # leave no trace
     assert "their-centroid" in tracker_ids()
     assert isinstance(make_tracker("their-centroid"), GatedCentroidTracker)

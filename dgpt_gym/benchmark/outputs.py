@@ -11,6 +11,7 @@ writes, to the report folder, what the sweep's runs allow:
 | ``results_tables.md`` (+ ``.csv``) | NRMSE beside the paper's, laid out like the paper | Tables II-IX |
 | ``results_hybrid.md``, ``figures/hybrid_comparison.png`` | NRMSE and STD of RMSE bars at sigma_z = 1, clutter 5 | Fig. 8 |
 | ``results_uncertainty.md``, ``figures/ucb_vs_ci.png`` | UCB and 3-sigma coverage and width; one S1 run | Figs. 4-7, Sec. VII-G |
+| ``figures/error_vs_time.png`` | 2-D error against time, median and interquartile band over runs, per scenario | |
 | ``figures/scenarios.png`` | trajectories over the sensor field | Fig. 3 |
 | ``figures/training_time.png`` | DGP training time (from the benchmark's CSV) | Fig. 2 |
 """
@@ -20,19 +21,27 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
-from dgpt_gym import baseline_report, report
-from dgpt_gym.evaluation import add_floor_ratios
-from dgpt_gym.plots import plot_scenarios, plot_training_time, plot_ucb_vs_ci, read_training_time
-from dgpt_gym.store import ResultsStore
-from dgpt_gym.sweep import (
+from dgpt_gym.benchmark import baseline_report, report
+from dgpt_gym.benchmark.episodes import add_floor_ratios, run_episode, run_episodes
+from dgpt_gym.benchmark.plots import (
+    plot_error_against_time,
+    plot_scenarios,
+    plot_training_time,
+    plot_ucb_vs_ci,
+    read_training_time,
+)
+from dgpt_gym.benchmark.store import ResultsStore
+from dgpt_gym.benchmark.sweep import (
     PAPER_AS_PRINTED_TRACKERS,
     PAPER_GP_TRACKERS,
     Grid,
     summarize_store,
     sweep_units,
 )
+from dgpt_gym.registry import TrackerSpec
 
 __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_UCB_GAIN"]
 
@@ -268,6 +277,51 @@ def _figure_run(units: list, summaries: list[dict]):
     )
 
 
+ERROR_CURVE_TRACKERS = ("dgpt-rbcm", "hybrid", "imm-pda", "clairvoyant")
+"""Trackers drawn in ``figures/error_vs_time.png`` when the sweep has them."""
+ERROR_CURVE_RUNS = 20
+"""Runs per scenario of that figure: its first seeds, re-run (the store keeps no per-step
+errors); 20 put the median's standard error at about a quarter of the band's width."""
+
+
+def error_curves(units: list) -> tuple[dict[str, dict[str, np.ndarray]], str]:
+    """``{scenario: {tracker: (runs, steps) 2-D errors}}`` for the trackers of
+    :data:`ERROR_CURVE_TRACKERS` in the sweep, at its lowest noise level and highest clutter
+    rate, on the first :data:`ERROR_CURVE_RUNS` seeds of each scenario; and those settings
+    as text."""
+    units = [unit for unit in units if unit.tracker in ERROR_CURVE_TRACKERS]
+    if not units:
+        return {}, ""
+    noise = min(unit.env_kwargs["noise_std"] for unit in units)
+    clutter = max(unit.env_kwargs["clutter_rate"] for unit in units)
+    curves: dict[str, dict[str, np.ndarray]] = {}
+    for scenario in sorted({unit.env_kwargs["scenario"] for unit in units}):
+        for tracker in ERROR_CURVE_TRACKERS:
+            chosen = sorted(
+                (
+                    unit
+                    for unit in units
+                    if unit.tracker == tracker
+                    and unit.env_kwargs["scenario"] == scenario
+                    and unit.env_kwargs["noise_std"] == noise
+                    and unit.env_kwargs["clutter_rate"] == clutter
+                ),
+                key=lambda unit: unit.seed,
+            )[:ERROR_CURVE_RUNS]
+            if not chosen:
+                continue
+            spec = TrackerSpec(tracker, chosen[0].entry_point)
+            envs = [gym.make("DGPTrack-v0", **unit.env_kwargs) for unit in chosen]
+            trackers = [spec.load()(**unit.tracker_kwargs) for unit in chosen]
+            results = run_episodes(envs, trackers, [unit.seed for unit in chosen])
+            for env in envs:
+                env.close()
+            curves.setdefault(scenario, {})[tracker] = np.array(
+                [np.linalg.norm(result.mean - result.truth, axis=1) for result in results]
+            )
+    return curves, f"sigma_z {noise:g} m, clutter rate {clutter:g}"
+
+
 def write_outputs(
     grids: list[Grid],
     out: str | Path,
@@ -277,11 +331,6 @@ def write_outputs(
 ) -> list[Path]:
     """Regenerate every output of the sweep ``grids`` from the store at ``out`` into
     ``report_dir`` (default ``out``). Returns the files written."""
-    import gymnasium as gym
-
-    from dgpt_gym.evaluation import run_episode
-    from dgpt_gym.registry import TrackerSpec
-
     grids = list(grids)
     report_dir = Path(report_dir if report_dir is not None else out)
     figures = report_dir / "figures"
@@ -335,6 +384,11 @@ def write_outputs(
         uncertainty.write_text(uncertainty_markdown(summaries, command, "figures/ucb_vs_ci.png"))
         written += [figure, uncertainty]
 
+    curves, settings = error_curves(units)
+    if curves:
+        written.append(
+            plot_error_against_time(curves, figures / "error_vs_time.png", settings)
+        )
     written.append(plot_scenarios(figures / "scenarios.png"))
     if training_time_csv is not None and Path(training_time_csv).exists():
         rows = read_training_time(training_time_csv)

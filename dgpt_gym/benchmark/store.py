@@ -16,6 +16,8 @@ import sqlite3
 import time
 from pathlib import Path
 
+import dgpt_gym
+
 __all__ = ["ResultsStore", "run_key", "DATABASE_NAME"]
 
 DATABASE_NAME = "results.sqlite"
@@ -94,9 +96,8 @@ class ResultsStore:
         return {key for (key,) in self._connection.execute(query, parameters)}
 
     def add(self, unit, status: str, metrics: dict | None, error: str | None, runtime_s: float):
-        """Store the outcome of ``unit`` (a :class:`dgpt_gym.sweep.RunUnit`), replacing an
+        """Store the outcome of ``unit`` (a :class:`dgpt_gym.benchmark.sweep.RunUnit`), replacing an
         earlier failure of the same run."""
-        from dgpt_gym import __version__
 
         env = unit.env_kwargs
         with self._connection:
@@ -115,7 +116,7 @@ class ResultsStore:
                     error,
                     None if metrics is None else _canonical(metrics),
                     runtime_s,
-                    __version__,
+                    dgpt_gym.__version__,
                     time.strftime("%Y-%m-%dT%H:%M:%S"),
                 ),
             )

@@ -83,7 +83,7 @@ class TrackerBase(abc.ABC):
     @classmethod
     def update_batch(cls, trackers: Sequence[TrackerBase], observations: Sequence[dict]) -> list:
         """One step of many episodes in lockstep: ``trackers[i].update(observations[i])``
-        for every i (:func:`dgpt_gym.evaluation.run_episodes` calls this). A tracker class
+        for every i (:func:`dgpt_gym.benchmark.episodes.run_episodes` calls this). A tracker class
         that can share work across episodes overrides it (:class:`agents.dgpt.DGPT`
         batches its learning and prediction); the estimates must equal the one-by-one ones."""
         return [tracker.update(obs) for tracker, obs in zip(trackers, observations)]

@@ -1,9 +1,9 @@
 """Tables of the paper's trackers against the field's standard trackers and the clairvoyant
 floor, and of every tracker's consistency (NEES, sigma coverage, track loss).
 
-Inputs are per-cell summaries (:func:`dgpt_gym.sweep.summarize_store` with
-:func:`dgpt_gym.evaluation.add_floor_ratios` applied); metric names are those of
-:meth:`dgpt_gym.evaluation.EpisodeResult.metrics`.
+Inputs are per-cell summaries (:func:`dgpt_gym.benchmark.sweep.summarize_store` with
+:func:`dgpt_gym.benchmark.episodes.add_floor_ratios` applied); metric names are those of
+:meth:`dgpt_gym.benchmark.episodes.EpisodeResult.metrics`.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from dgpt_gym.evaluation import interval_half_width
-from dgpt_gym.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
-from dgpt_gym.sweep import PAPER_GP_TRACKERS
+from dgpt_gym.benchmark.episodes import interval_half_width
+from dgpt_gym.benchmark.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
+from dgpt_gym.benchmark.protocol import PAPER_GP_TRACKERS
 
 __all__ = [
     "COMPARISON_TRACKERS",

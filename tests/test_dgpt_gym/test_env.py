@@ -278,3 +278,20 @@ def test_reset_options_are_checked(options):
     env = gym.make("DGPTrack-v0").unwrapped
     with pytest.raises(ValueError, match="options"):
         env.reset(seed=0, options=options)
+
+
+def test_render_draws_the_annotated_uncertainty():
+    env = gym.make("DGPTrack-v0", scenario="S1", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.array([500.0, 500.0]))
+    plain = env.render()
+    env.reset(seed=0)
+    env.unwrapped.annotate(var=np.array([400.0, 900.0]), ucb=np.array([80.0, 120.0]))
+    env.step(np.array([500.0, 500.0]))
+    annotated = env.render()
+    assert plain.shape == annotated.shape and np.any(plain != annotated)
+    assert env.unwrapped.uncertainties_[-1][1].tolist() == [80.0, 120.0]
+    with pytest.raises(ValueError, match="var"):
+        env.unwrapped.annotate(var=np.array([-1.0, 1.0]))
+    with pytest.raises(ValueError, match="ucb"):
+        env.unwrapped.annotate(var=np.array([1.0, 1.0]), ucb=np.array([np.nan, 1.0]))

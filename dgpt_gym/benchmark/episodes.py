@@ -24,7 +24,8 @@ import numpy as np
 from scipy import stats
 from tqdm.auto import tqdm
 
-from dgpt_gym import metrics
+from dgpt_gym.benchmark import metrics
+from dgpt_gym.benchmark.report import paper_value
 
 __all__ = [
     "EpisodeResult",
@@ -62,7 +63,7 @@ class EpisodeResult:
     sensing_range: float = 50.0
 
     def metrics(self) -> dict[str, float]:
-        """The episode's metrics (module :mod:`dgpt_gym.metrics`), flat, as plain floats.
+        """The episode's metrics (module :mod:`dgpt_gym.benchmark.metrics`), flat, as plain floats.
 
         Per axis (suffix ``_x`` / ``_y``): ``nrmse``, ``rmse``, ``ci_coverage`` and
         ``ci_width`` (3 sigma), ``ucb_coverage`` and ``ucb_width`` (NaN without a UCB),
@@ -70,7 +71,7 @@ class EpisodeResult:
         ``rmse_2d``, ``anees``, ``nees_median`` and the sigma coverages also on the steps
         where some sensor senses the target (suffix ``_detected``) and on coverage-gap
         steps (``_gap``; NaN when the episode has none). ``track_lost`` (0 or 1) and
-        ``lost_step_fraction`` (:func:`dgpt_gym.metrics.track_loss` at twice the sensing
+        ``lost_step_fraction`` (:func:`dgpt_gym.benchmark.metrics.track_loss` at twice the sensing
         range), ``step_time_ms`` (median) and ``no_detection_fraction``.
         """
         std = np.sqrt(np.maximum(self.var, 0.0))
@@ -125,7 +126,7 @@ class EpisodeResult:
 
 
 def run_episode(env: gym.Env, tracker, seed: int | None) -> EpisodeResult:
-    """Run ``tracker`` (a :class:`agents.base.Tracker`) for one episode of ``env``.
+    """Run ``tracker`` (a :class:`dgpt_gym.tracker.Tracker`) for one episode of ``env``.
 
     The tracker is reset with the ``ProblemSpec`` from the env's reset info and the same
     seed, so the result is a function of ``seed``.
@@ -139,7 +140,7 @@ def run_episodes(
     """Run episode i of ``envs[i]`` with ``trackers[i]`` and ``seeds[i]``, all in lockstep.
 
     Each step, the trackers of the episodes still running take their observations in one
-    call of ``update_batch`` when their class has one (:meth:`agents.base.TrackerBase.update_batch`;
+    call of ``update_batch`` when their class has one (:meth:`dgpt_gym.tracker.TrackerBase.update_batch`;
     DGPT batches its learning and prediction over the episodes), else one ``update`` each
     (oracles always: they take ``truth=info`` too, see the module docstring).
     The results equal those of :func:`run_episode` on each episode alone; ``step_time`` is
@@ -318,7 +319,6 @@ def format_summary_table(rows: list[dict]) -> str:
     interval over runs and the paper's value where the paper has one, the 2-D RMSE (m)
     with its interval, its ratio to the clairvoyant floor, ANEES (nominal 2), the 3-sigma
     coverage per axis (nominal 99.7 %), the track-loss rate and the runs."""
-    from dgpt_gym.report import paper_value
 
     header = (
         "| tracker | scenario | noise_std | clutter_rate | NRMSE X % | paper X | NRMSE Y % |"
