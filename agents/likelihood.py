@@ -19,7 +19,24 @@ import numpy as np
 
 from dgpt_gym.problem import ProblemSpec
 
-__all__ = ["PoissonLikelihood"]
+__all__ = ["PoissonLikelihood", "squared_distances", "measurement_chunks", "CHUNK_ELEMENTS"]
+
+CHUNK_ELEMENTS = 2**21
+"""Position-measurement pairs evaluated at once (an offsets array of 32 MiB): a scan with
+heavy clutter is processed in chunks of measurements instead of one array that grows with
+particles x measurements. Scans of the paper's grid fit in one chunk."""
+
+
+def measurement_chunks(n_positions: int, n_measurements: int) -> list[slice]:
+    """Slices of the measurement axis with at most :data:`CHUNK_ELEMENTS` pairs each."""
+    size = max(1, CHUNK_ELEMENTS // max(n_positions, 1))
+    return [slice(start, start + size) for start in range(0, n_measurements, size)]
+
+
+def squared_distances(positions: np.ndarray, measurements: np.ndarray) -> np.ndarray:
+    """|x_i - z_j|^2 for positions (P, 2) and measurements (n, 2): a (P, n) array."""
+    offsets = positions[:, None, :] - measurements[None, :, :]
+    return np.einsum("pnk,pnk->pn", offsets, offsets)
 
 
 @dataclass(frozen=True)
@@ -40,7 +57,7 @@ class PoissonLikelihood:
 
     @classmethod
     def from_spec(cls, spec: ProblemSpec) -> PoissonLikelihood:
-        return cls(spec.clutter_rate, spec.detection_rate, spec.noise_std, spec.sensing_area)
+        return cls(spec.clutter_rate, spec.detection_rate, spec.model_noise_std, spec.sensing_area)
 
     @property
     def clutter_density(self) -> float:
@@ -51,8 +68,7 @@ class PoissonLikelihood:
         """log(lambda_c / A_sen + lambda_T N(z_j; x_i, sigma_z^2 I)) for every position x_i
         (P, 2) and measurement z_j (n, 2): an (P, n) array."""
         variance = self.noise_std**2
-        offsets = positions[:, None, :] - measurements[None, :, :]
-        squared = np.einsum("pnk,pnk->pn", offsets, offsets)
+        squared = squared_distances(positions, measurements)
         peak = self.detection_rate / (2.0 * np.pi * variance)
         if self.clutter_rate == 0.0:
             return np.log(peak) - 0.5 * squared / variance
@@ -61,6 +77,7 @@ class PoissonLikelihood:
 
     def log_likelihood(self, positions: np.ndarray, measurements: np.ndarray) -> np.ndarray:
         """log p(Z | x_i) up to a constant, eq. (42), for positions (P, 2): shape (P,)."""
-        if measurements.shape[0] == 0:
-            return np.zeros(positions.shape[0])
-        return self.log_factors(positions, measurements).sum(axis=1)
+        total = np.zeros(positions.shape[0])
+        for chunk in measurement_chunks(positions.shape[0], measurements.shape[0]):
+            total += self.log_factors(positions, measurements[chunk]).sum(axis=1)
+        return total

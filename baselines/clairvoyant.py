@@ -5,7 +5,7 @@ environment's ``info["target_origin"]``) and uses the scenario's true motion mod
 true parameters and switching times. No tracker that must find the target among clutter,
 and learn or guess its motion, can expect to beat it; every tracker's RMSE is reported
 divided by its (docs/results.md). It is an oracle (``oracle = True``): the evaluation loop
-hands it the environment's ``info`` (:func:`dgpt_gym.evaluation.run_episodes`), which no
+hands it the environment's ``info`` (:func:`dgpt_gym.benchmark.episodes.run_episodes`), which no
 other tracker ever sees.
 
 Motion models, derived from how :mod:`dgpt_gym.scenarios` draws the paths (positions are
@@ -52,7 +52,6 @@ import functools
 
 import numpy as np
 
-from agents.base import Estimate, TrackerBase
 from baselines.cpf import turn_transition
 from baselines.kalman import kalman_predict, kalman_update
 from dgpt_gym.problem import ProblemSpec
@@ -62,6 +61,7 @@ from dgpt_gym.scenarios import (
     Scenario,
     SingerScenario,
 )
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_choice
 
 __all__ = [
@@ -155,7 +155,7 @@ class ClairvoyantFilter(TrackerBase):
         if truth is None or "scenario" not in truth:
             raise ValueError(
                 "the clairvoyant filter is an oracle: reset it with truth=info, the env's reset "
-                "info (dgpt_gym.evaluation.run_episode does)"
+                "info (dgpt_gym.benchmark.episodes.run_episode does)"
             )
         self.spec_ = spec
         scenario: Scenario = truth["scenario"]
@@ -198,7 +198,7 @@ class ClairvoyantFilter(TrackerBase):
         self.mean_[self.position_index_] = measurements.mean(axis=0)
         _, mean_square_speed = speed_moments(self.scenario_.speed_range)
         variances = np.zeros(n)
-        variances[self.position_index_] = self.spec_.noise_std**2 / measurements.shape[0]
+        variances[self.position_index_] = self.spec_.model_noise_std**2 / measurements.shape[0]
         variances[self.velocity_index_] = mean_square_speed / 2.0  # uniform heading
         if isinstance(self.scenario_, SingerScenario):
             variances[[2, 5]] = self.acceleration_std_**2
@@ -237,7 +237,7 @@ class ClairvoyantFilter(TrackerBase):
         if truth is None or "target_origin" not in truth:
             raise ValueError(
                 "the clairvoyant filter is an oracle: pass truth=info, the env's info returned "
-                "with obs (dgpt_gym.evaluation.run_episode does)"
+                "with obs (dgpt_gym.benchmark.episodes.run_episode does)"
             )
         rows = np.asarray(obs["mask"]).astype(bool) & np.asarray(truth["target_origin"])
         measurements = np.asarray(obs["measurements"], dtype=float)[rows]
@@ -248,7 +248,7 @@ class ClairvoyantFilter(TrackerBase):
         else:
             self._predict(truth)
             if measurements.shape[0]:
-                noise = self.spec_.noise_std**2 / measurements.shape[0] * np.eye(2)
+                noise = self.spec_.model_noise_std**2 / measurements.shape[0] * np.eye(2)
                 self.mean_, self.cov_, _, _ = kalman_update(
                     self.mean_, self.cov_, measurements.mean(axis=0), self.measurement_matrix_,
                     noise,
@@ -260,5 +260,5 @@ class ClairvoyantFilter(TrackerBase):
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         raise TypeError(
             "the clairvoyant filter is an oracle and needs the env's info each step; run it "
-            "with dgpt_gym.evaluation.run_episode, not through predict()"
+            "with dgpt_gym.benchmark.episodes.run_episode, not through predict()"
         )

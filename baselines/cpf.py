@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Estimate, TrackerBase
-from agents.likelihood import PoissonLikelihood
+from agents.likelihood import PoissonLikelihood, measurement_chunks, squared_distances
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = [
@@ -167,7 +167,7 @@ class MultipleModelCPF(TrackerBase):
     def _initialise(self, measurements: np.ndarray) -> None:
         n, rng = self.n_particles, self.rng_
         seeds = measurements[rng.integers(0, measurements.shape[0], n)]
-        positions = seeds + rng.normal(0.0, self.spec_.noise_std, (n, 2))
+        positions = seeds + rng.normal(0.0, self.spec_.model_noise_std, (n, 2))
         heading = rng.uniform(0.0, 2.0 * np.pi, n)
         speed = self.max_initial_speed * np.sqrt(rng.random(n))
         self.particles_ = np.column_stack(
@@ -195,9 +195,11 @@ class MultipleModelCPF(TrackerBase):
         the target left the cloud (an abrupt manoeuvre, a long gap) and no reweighting can
         bring it back."""
         positions = self.particles_[:, [0, 2]]
-        offsets = positions[:, None, :] - measurements[None, :, :]
-        closest = np.min(np.einsum("pnk,pnk->pn", offsets, offsets))
-        return closest > (REACQUIRE_SIGMAS * self.spec_.noise_std) ** 2
+        closest = min(
+            squared_distances(positions, measurements[chunk]).min()
+            for chunk in measurement_chunks(len(positions), len(measurements))
+        )
+        return closest > (REACQUIRE_SIGMAS * self.spec_.model_noise_std) ** 2
 
     def _update(self, measurements: np.ndarray) -> None:
         if self._lost(measurements):

@@ -35,7 +35,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from agents.base import Estimate, TrackerBase
 from baselines.cpf import turn_transition, validate_mode_transition
 from baselines.kalman import (
     POSITION_MATRIX,
@@ -48,19 +47,15 @@ from baselines.kalman import (
     reduce_mixture,
 )
 from dgpt_gym.problem import ProblemSpec
+from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_choice, check_real
 
-__all__ = ["PDAFilter", "IMMPDAFilter", "ASSOCIATIONS", "REACQUIRE_PROBABILITY", "MIN_NOISE_STD"]
+__all__ = ["PDAFilter", "IMMPDAFilter", "ASSOCIATIONS", "REACQUIRE_PROBABILITY"]
 
 ASSOCIATIONS = ("multi", "single")
 REACQUIRE_PROBABILITY = 1.0 - 1e-9
 """Gate probability of the track-loss test: a scan none of whose measurements falls inside
 this chi-square(2) gate of any mode restarts the track."""
-
-
-MIN_NOISE_STD = 1e-3
-"""sigma_z floor, m: with noise-free measurements (noise_std = 0) the Kalman and PDA updates
-are singular; a millimetre keeps them defined and changes nothing measurable."""
 
 
 def coverage_gap_probability(spec: ProblemSpec) -> float:
@@ -164,7 +159,7 @@ class IMMPDAFilter(TrackerBase):
             noises.append(noise)
         self.transitions_ = np.stack(transitions)
         self.process_noises_ = np.stack(noises)
-        self.noise_std_ = max(spec.noise_std, MIN_NOISE_STD)
+        self.noise_std_ = spec.model_noise_std
         self.measurement_noise_ = self.noise_std_**2 * np.eye(2)
         self.clutter_density_ = spec.clutter_rate / spec.sensing_area
         self.miss_probability_ = (

@@ -6,7 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ProblemSpec"]
+from dgpt_gym.measurements import CLUTTER_SENSORS
+from dgpt_gym.validation import check_choice, check_integer, check_real
+
+__all__ = ["ProblemSpec", "MIN_MODEL_NOISE_STD"]
+
+MIN_MODEL_NOISE_STD = 1e-3
+"""m: the smallest sigma_z a model-based tracker assumes (a millimetre: far below any
+error the trackers reach, far above what makes a Gaussian density overflow)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -19,7 +26,8 @@ class ProblemSpec:
     Attributes:
         sensor_positions: (n_sensors, 2) sensor coordinates, m.
         sensing_range: r, m.
-        noise_std: sigma_z of target measurements, m.
+        noise_std: sigma_z of target measurements, m, >= 0 (0: exact target measurements;
+            model-based trackers use :attr:`model_noise_std`).
         clutter_rate: lambda_c, clutter points per clutter-producing sensor per step.
         detection_rate: lambda_T of the zero-truncated Poisson target count.
         dt: sampling period, s.
@@ -37,6 +45,28 @@ class ProblemSpec:
     area: float
     clutter_sensors: str
     n_steps: int
+
+    def __post_init__(self) -> None:
+        # trackers divide by these; the env checks them too, a hand-built spec gets the same
+        for name in ("sensing_range", "detection_rate", "dt", "area"):
+            check_real(name, getattr(self, name), low=0.0, low_inclusive=False)
+        for name in ("noise_std", "clutter_rate"):
+            check_real(name, getattr(self, name), low=0.0)
+        check_choice("clutter_sensors", self.clutter_sensors, CLUTTER_SENSORS)
+        check_integer("n_steps", self.n_steps, low=1)
+        positions = np.asarray(self.sensor_positions)
+        if positions.ndim != 2 or positions.shape[1] != 2 or not np.all(np.isfinite(positions)):
+            raise ValueError(
+                "sensor_positions must be a finite (n_sensors, 2) array; got shape "
+                f"{positions.shape}"
+            )
+
+    @property
+    def model_noise_std(self) -> float:
+        """The sigma_z model-based trackers assume: ``noise_std``, floored at
+        :data:`MIN_MODEL_NOISE_STD` so that exact measurements (``noise_std = 0``) leave
+        their Gaussian likelihoods and Kalman gains finite."""
+        return max(self.noise_std, MIN_MODEL_NOISE_STD)
 
     @property
     def sensing_area(self) -> float:

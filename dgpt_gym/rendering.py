@@ -1,12 +1,17 @@
 """Matplotlib rendering of :class:`~dgpt_gym.env.DGPTrackEnv`: sensors, the ranges of the
-sensors that sense the target, the measurements of the current step, the true path so far
-and the agent's estimates."""
+sensors that sense the target, the measurements of the current step, the true path so far,
+the agent's estimates and, where the agent annotated it
+(:meth:`~dgpt_gym.env.DGPTrackEnv.annotate`), the last estimate's 3-sigma ellipse and UCB
+box. Axes in metres; the legend sits below the field, where it cannot hide the target."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Renderer"]
+__all__ = ["Renderer", "ELLIPSE_SIGMAS"]
+
+ELLIPSE_SIGMAS = 3.0
+"""Half-axes of the drawn ellipse, in standard deviations per axis."""
 
 
 class Renderer:
@@ -19,12 +24,12 @@ class Renderer:
         self.env = env
         self.figure = Figure(figsize=(size_inches, size_inches), dpi=dpi)
         self.canvas = FigureCanvasAgg(self.figure)
-        self.axes = self.figure.add_axes((0.08, 0.08, 0.88, 0.88))
+        self.axes = self.figure.add_axes((0.12, 0.2, 0.84, 0.74))
         self._window = None
 
     def _draw(self) -> None:
         from matplotlib.collections import PatchCollection
-        from matplotlib.patches import Circle
+        from matplotlib.patches import Circle, Ellipse, Rectangle
 
         env, ax = self.env, self.axes
         step = min(env.step_, env.n_steps - 1)
@@ -49,7 +54,35 @@ class Renderer:
         if env.estimates_:
             estimates = np.asarray(env.estimates_)
             ax.plot(estimates[:, 0], estimates[:, 1], c="tab:green", lw=1.0, label="estimate")
-        ax.legend(loc="upper right", fontsize=7)
+            last = env.uncertainties_[-1] if env.uncertainties_ else None
+            if last is not None:
+                var, ucb = last
+                ax.add_patch(
+                    Ellipse(
+                        tuple(estimates[-1]),
+                        *(2.0 * ELLIPSE_SIGMAS * np.sqrt(var)),
+                        fill=False,
+                        ec="tab:green",
+                        lw=1.0,
+                        label=f"{ELLIPSE_SIGMAS:g}-sigma ellipse",
+                    )
+                )
+                if ucb is not None and np.all(np.isfinite(ucb)):
+                    ax.add_patch(
+                        Rectangle(
+                            tuple(estimates[-1] - ucb),
+                            *(2.0 * ucb),
+                            fill=False,
+                            ec="tab:purple",
+                            ls="--",
+                            lw=1.0,
+                            label="UCB box",
+                        )
+                    )
+        ax.set_xlabel("x (m)", fontsize=8)
+        ax.set_ylabel("y (m)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize=7)
 
     def render(self, mode: str):
         self._draw()
