@@ -100,6 +100,9 @@ def test_far_clutter_moves_the_exact_posterior_far_less_than_the_paper_variant()
 
 
 def test_hybrid_tracks_and_bounds_its_estimate():
+    """Threshold: the paper's DGPT-RBCM NRMSE on this cell (Table IV, S3, sigma_z 1, clutter
+    5: 3.64 % X, 3.23 % Y), which its hybrid filter beat (Fig. 8); here 2.19 / 2.85 % (exact)
+    and 2.68 / 3.16 % (paper variant)."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
     for tracker_id in ("hybrid", "hybrid-paper"):
         result = run_episode(env, make_tracker(tracker_id), seed=0)
@@ -108,7 +111,7 @@ def test_hybrid_tracks_and_bounds_its_estimate():
             and np.all(result.var > 0)
             and np.all(np.isfinite(result.ucb))
         )
-        assert result.metrics()["nrmse_x"] < 0.1
+        assert result.metrics()["nrmse_x"] < 0.0364 and result.metrics()["nrmse_y"] < 0.0323
 
 
 def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
