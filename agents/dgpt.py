@@ -49,6 +49,7 @@ __all__ = [
     "INITIAL_HYPERPARAMETERS",
     "HYPERPARAMETER_BOUNDS",
     "FIT_GRADIENT_TOLERANCE",
+    "BOUND_TOLERANCE",
     "INPUTS",
     "KERNELS",
     "BOUNDS",
@@ -59,6 +60,10 @@ __all__ = [
 INPUTS = ("tgp", "stgp")
 KERNELS = ("se", "ncv")
 BOUNDS = ("tracking", "loose")
+
+BOUND_TOLERANCE = 1e-6
+"""A fitted log hyperparameter this close to a bound counts as on it (the projected
+optimiser puts a parameter exactly on the bound it hits)."""
 
 FIT_GRADIENT_TOLERANCE = 1e-2
 """Projected-gradient tolerance of the online fit, in nats per unit log hyperparameter:
@@ -226,10 +231,26 @@ class DGPT(TrackerBase):
         self.expert_next_var_ = np.empty((0, 2))
         self.n_experts_ = 0
         self.fit_failures_ = 0
+        self.fits_ = 0  # steps whose hyperparameters were fitted
+        self.fits_at_bound_ = np.zeros(len(self._named_parameters()), dtype=int)  # per name
+        self.fits_any_bound_ = 0
         self.last_innovation_ = np.empty((0, 2))  # gated summaries - their predictions
         self.last_gated_out_ = 0  # measurements the hard gate dropped at the last step
         self._data: ExpertData | None = None  # the window's expert data of the last step
         self.step_ = -1
+
+    def diagnostics(self) -> dict[str, float]:
+        """``share_at_bound``: the share of this episode's fitted steps whose maximum-
+        likelihood hyperparameters ended on a bound (within :data:`BOUND_TOLERANCE` in log
+        space, on either axis): a fit the window's data cannot identify; then
+        ``share_at_bound_<name>`` per hyperparameter."""
+        if not self.fits_:
+            return {"share_at_bound": float("nan")}
+        shares = {
+            f"share_at_bound_{name}": count / self.fits_
+            for name, count in zip(self._named_parameters(), self.fits_at_bound_)
+        }
+        return {"share_at_bound": self.fits_any_bound_ / self.fits_, **shares}
 
     def set_window(self, window: int, keep: int | None = None) -> None:
         """Use the window length C = ``window`` from now on in this episode (the RL window
@@ -391,11 +412,20 @@ class _Group:
             gradient_tolerance=FIT_GRADIENT_TOLERANCE,
             inverse_hessian=np.stack([tracker.curvature_ for tracker in self.trackers]),
         )
-        for tracker, kept, curvature in zip(
-            self.trackers, result.kept_start, result.inverse_hessian
+        bounds = self.first.bounds()
+        on_bound = np.any(  # (E, p): parameter on either bound on either axis
+            (np.abs(result.log_params - bounds[:, 0]) < BOUND_TOLERANCE)
+            | (np.abs(result.log_params - bounds[:, 1]) < BOUND_TOLERANCE),
+            axis=-2,
+        )
+        for tracker, kept, curvature, at_bound in zip(
+            self.trackers, result.kept_start, result.inverse_hessian, on_bound
         ):
             tracker.fit_failures_ += int(np.any(kept))
             tracker.curvature_ = curvature
+            tracker.fits_ += 1
+            tracker.fits_at_bound_ += at_bound.astype(int)
+            tracker.fits_any_bound_ += int(at_bound.any())
         return result.log_params
 
     def factorize(self, log_params: np.ndarray) -> gp.Factorization:

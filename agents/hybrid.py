@@ -222,6 +222,10 @@ class HybridFilter(TrackerBase):
     def update(self, obs: dict) -> Estimate:
         return self.update_batch([self], [obs])[0]
 
+    def diagnostics(self) -> dict[str, float]:
+        """Those of the wrapped DGPT (its fit's ``share_at_bound``)."""
+        return self.dgpt.diagnostics()
+
     @classmethod
     def update_batch(
         cls, trackers: Sequence[HybridFilter], observations: Sequence[dict]

@@ -52,6 +52,12 @@ class Tracker(Protocol):
     def update(self, obs: dict) -> Estimate:
         """Take the observation of step t and return the estimate of p_t."""
 
+    def diagnostics(self) -> dict[str, float]:
+        """Numbers the tracker reports about its own working over the episode so far (e.g.
+        how often its fit ended on a bound), stored with the episode's metrics by the
+        evaluation; none by default."""
+        return {}
+
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         """Stable-Baselines3's policy contract: returns ``(actions, state)``."""
 

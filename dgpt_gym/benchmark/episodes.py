@@ -61,6 +61,7 @@ class EpisodeResult:
     n_measurements: np.ndarray
     n_detecting: np.ndarray
     sensing_range: float = 50.0
+    diagnostics: dict = field(default_factory=dict)
 
     def metrics(self) -> dict[str, float]:
         """The episode's metrics (module :mod:`dgpt_gym.benchmark.metrics`), flat, as plain floats.
@@ -72,7 +73,9 @@ class EpisodeResult:
         where some sensor senses the target (suffix ``_detected``) and on coverage-gap
         steps (``_gap``; NaN when the episode has none). ``track_lost`` (0 or 1) and
         ``lost_step_fraction`` (:func:`dgpt_gym.benchmark.metrics.track_loss` at twice the sensing
-        range), ``step_time_ms`` (median) and ``no_detection_fraction``.
+        range), ``step_time_ms`` (median) and ``no_detection_fraction``. Then the tracker's
+        own :meth:`~dgpt_gym.tracker.TrackerBase.diagnostics` at the end of the episode
+        (e.g. DGPT's ``share_at_bound``).
         """
         std = np.sqrt(np.maximum(self.var, 0.0))
         ci = metrics.CI_SIGMAS * std
@@ -103,6 +106,7 @@ class EpisodeResult:
         flat["lost_step_fraction"] = float(np.mean(lost))
         flat["step_time_ms"] = float(1e3 * np.median(self.step_time))
         flat["no_detection_fraction"] = float(np.mean(self.n_detecting == 0))
+        flat.update({key: float(value) for key, value in self.diagnostics.items()})
         return flat
 
     def _consistency(self, steps, suffix: str) -> dict[str, float]:
@@ -192,6 +196,9 @@ def run_episodes(
             if not (terminated or truncated):
                 still_running.append(index)
         running = still_running
+    for record, tracker in zip(records, trackers):
+        diagnostics = getattr(tracker, "diagnostics", None)  # optional for user trackers
+        record.diagnostics = dict(diagnostics()) if callable(diagnostics) else {}
     return [record.result() for record in records]
 
 
@@ -215,6 +222,7 @@ class _EpisodeRecord:
     step_time: list = field(default_factory=list)
     n_measurements: list = field(default_factory=list)
     n_detecting: list = field(default_factory=list)
+    diagnostics: dict = field(default_factory=dict)
 
     def result(self) -> EpisodeResult:
         return EpisodeResult(
@@ -226,6 +234,7 @@ class _EpisodeRecord:
             n_measurements=np.asarray(self.n_measurements),
             n_detecting=np.asarray(self.n_detecting),
             sensing_range=self.sensing_range,
+            diagnostics=self.diagnostics,
         )
 
 

@@ -18,7 +18,6 @@ writes, to the report folder, what the sweep's runs allow:
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import gymnasium as gym
@@ -96,12 +95,7 @@ def baselines_markdown(
 
 def write_cells_csv(summaries: list[dict], path: Path) -> Path:
     """One CSV row per cell: its settings and :func:`summarize_runs` of its runs."""
-    keys = list(dict.fromkeys(key for row in summaries for key in row))
-    with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=keys)
-        writer.writeheader()
-        writer.writerows(summaries)
-    return path
+    return report.write_rows_csv(summaries, path)
 
 
 def _percent_pair(row: dict, key: str) -> str:
@@ -213,6 +207,47 @@ def paper_comparison_markdown(summaries: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def bounds_markdown(summaries: list[dict]) -> list[str]:
+    """Per tracker that reports it (DGPT, the GP trackers, the hybrid filter): the share of
+    fitted steps with a hyperparameter on a bound, overall and per hyperparameter, per
+    scenario (mean over the scenario's cells)."""
+    rows = [row for row in summaries if np.isfinite(row.get("share_at_bound", np.nan))]
+    if not rows:
+        return []
+    names = list(
+        dict.fromkeys(
+            key.removeprefix("share_at_bound_")
+            for row in rows
+            for key in row
+            if key.startswith("share_at_bound_") and np.isfinite(row[key])
+        )
+    )
+    lines = [
+        "## Hyperparameters on their bounds",
+        "",
+        "Share of the steps whose maximum-likelihood fit (eq. (22)) ended with a hyperparameter"
+        " on a bound of `agents.dgpt.HYPERPARAMETER_BOUNDS` (either axis): those steps the"
+        " window's data did not identify the model. Mean over the cells of each scenario; %.",
+        "",
+        "| tracker | scenario | any | " + " | ".join(names) + " |",
+        "|---|---|---|" + "---|" * len(names),
+    ]
+    for tracker in dict.fromkeys(row["tracker"] for row in rows):
+        for scenario in sorted({row["scenario"] for row in rows if row["tracker"] == tracker}):
+            cell = [r for r in rows if r["tracker"] == tracker and r["scenario"] == scenario]
+
+            def share(key, cell=cell):
+                values = [r.get(key, np.nan) for r in cell]
+                return "-" if np.all(np.isnan(values)) else f"{100 * np.nanmean(values):.0f}"
+
+            lines.append(
+                f"| {tracker} | {scenario} | {share('share_at_bound')} | "
+                + " | ".join(share(f"share_at_bound_{name}") for name in names)
+                + " |"
+            )
+    return lines + [""]
+
+
 def results_markdown(
     summaries: list[dict], failures: list[dict], total_units: int, command: str, links: list[str]
 ) -> str:
@@ -247,6 +282,7 @@ def results_markdown(
         "",
         nrmse_by_scenario_markdown(summaries),
         "",
+        *bounds_markdown(summaries),
         "## Tracker step time",
         "",
         "| tracker | median step time (ms), mean over runs |",

@@ -26,6 +26,7 @@ __all__ = [
     "paper_table_markdown",
     "summary_against_paper",
     "write_paper_tables",
+    "write_rows_csv",
 ]
 
 PAPER_NRMSE_PATH = Path(__file__).with_name("data") / "paper_nrmse.csv"
@@ -174,11 +175,18 @@ def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None
                     parts += [table, ""]
     parts += windows_markdown()
     path.write_text("\n".join(parts))
-    keys = list(rows[0])
-    with path.with_suffix(path.suffix + ".csv").open("w", newline="") as handle:
+    write_rows_csv(rows, path.with_suffix(path.suffix + ".csv"))
+
+
+def write_rows_csv(rows: list[dict], path: Path) -> Path:
+    """``rows`` as CSV, with the union of their keys as columns (trackers report different
+    metrics: a GP tracker's ``share_at_bound_*`` is absent for a Kalman filter)."""
+    keys = list(dict.fromkeys(key for row in rows for key in row))
+    with path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=keys)
         writer.writeheader()
         writer.writerows(rows)
+    return path
 
 
 def windows_markdown() -> list[str]:

@@ -306,3 +306,33 @@ def test_ucb_is_appendix_a_bound_on_the_experts_coordinate_variances(anytime):
             checked += 1
         observation, *_ = env.step(estimate.mean)
     assert checked >= 10
+
+
+def test_share_at_bound_counts_the_fits_that_end_on_a_bound():
+    """The diagnostics equal a count made outside the tracker from the hyperparameters it
+    keeps after each step, against its bounds."""
+    env = gym.make("DGPTrack-v0", scenario="S4", clutter_rate=1.0)
+    observation, info = env.reset(seed=3)
+    tracker = DGPT(window=3, inputs="stgp")
+    tracker.reset(info["problem_spec"])
+    bounds = tracker.bounds()
+    fitted, on_bound, per_name = 0, 0, np.zeros(bounds.shape[0])
+    for _ in range(80):
+        before = tracker.fits_
+        estimate = tracker.update(observation)
+        if tracker.fits_ > before:
+            fitted += 1
+            hit = np.any(
+                np.isclose(tracker.log_params_, bounds[:, 0], rtol=0, atol=1e-6)
+                | np.isclose(tracker.log_params_, bounds[:, 1], rtol=0, atol=1e-6),
+                axis=0,
+            )
+            on_bound += hit.any()
+            per_name += hit
+        observation, *_ = env.step(estimate.mean)
+    shares = tracker.diagnostics()
+    assert fitted > 40
+    assert shares["share_at_bound"] == pytest.approx(on_bound / fitted)
+    for name, count in zip(["signal_var", "space_lengthscale", "time_lengthscale", "noise_var"], per_name):
+        assert shares[f"share_at_bound_{name}"] == pytest.approx(count / fitted)
+    assert 0 < shares["share_at_bound_noise_var"] < 1  # both outcomes occur in this episode
