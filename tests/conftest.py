@@ -4,6 +4,23 @@ import numpy as np
 import pytest
 
 import dgpt_gym  # noqa: F401  (registers DGPTrack-v0 and the trackers)
+from dgpt_gym.problem import ProblemSpec
+
+
+def problem_spec(sensor_positions=((0.0, 0.0),), **changes) -> ProblemSpec:
+    """A hand-built ProblemSpec for tests: 50 m range, sigma_z 1 m, unit rates and period,
+    a 1000 m area, clutter at detecting sensors, 10 steps, unless ``changes`` say otherwise."""
+    fields = dict(
+        sensing_range=50.0,
+        noise_std=1.0,
+        clutter_rate=1.0,
+        detection_rate=1.0,
+        dt=1.0,
+        area=1000.0,
+        clutter_sensors="detecting",
+        n_steps=10,
+    )
+    return ProblemSpec(np.asarray(sensor_positions, dtype=float), **{**fields, **changes})
 
 
 def mixture_moments(log_weights, means, covs):

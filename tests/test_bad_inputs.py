@@ -8,10 +8,10 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import problem_spec
 
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark import cli as evaluate_cli
-from dgpt_gym.problem import ProblemSpec
 
 # (keyword arguments of DGPTrack-v0, the name the error must contain)
 ENV_ARGUMENTS = [
@@ -156,21 +156,6 @@ def test_bad_tracker_arguments(tracker, kwargs, name):
         make_tracker(tracker, **kwargs)
 
 
-def _spec(**changes):
-    fields = dict(
-        sensor_positions=np.zeros((3, 2)),
-        sensing_range=50.0,
-        noise_std=1.0,
-        clutter_rate=1.0,
-        detection_rate=1.0,
-        dt=1.0,
-        area=1000.0,
-        clutter_sensors="detecting",
-        n_steps=10,
-    )
-    return ProblemSpec(**{**fields, **changes})
-
-
 @pytest.mark.parametrize(
     "changes, name",
     [
@@ -186,7 +171,7 @@ def _spec(**changes):
 def test_a_hand_built_problem_spec_is_checked(changes, name):
     # trackers divide by noise_std and friends: a spec that would crash one is refused
     with pytest.raises(ValueError, match=name):
-        _spec(**changes)
+        problem_spec(**{"sensor_positions": np.zeros((3, 2)), **changes})
 
 
 EVALUATE_ARGUMENTS = [

@@ -3,6 +3,8 @@ tracker that processes its measurements, and the scoring of the tracker's estima
 
 from __future__ import annotations
 
+import abc
+
 import gymnasium as gym
 
 from agents.dgpt import DGPT
@@ -12,7 +14,7 @@ from dgpt_gym.validation import check_real
 __all__ = ["TrackerInsideEnv"]
 
 
-class TrackerInsideEnv(gym.Env):
+class TrackerInsideEnv(gym.Env, abc.ABC):
     """Base of the RL environments: owns the inner env (``self.inner``, which also draws the
     scene for ``render``), the tracker (``self.tracker``), the measurements of the coming
     step (``self._pending``) and the error normalisation (``self.error_scale``)."""
@@ -30,11 +32,11 @@ class TrackerInsideEnv(gym.Env):
         )
         self._pending = None
 
+    @abc.abstractmethod
     def fixed_actions(self) -> tuple[dict[str, object], str]:
         """The fixed baselines of this environment: ``{name: action}``, the grid in which the
         best fixed setting is searched (:func:`agents.rl.evaluation.baseline_policies`), and
         the name of the default one. Every RL environment defines its own."""
-        raise NotImplementedError(f"{type(self).__name__} defines no fixed baselines")
 
     def render(self):
         """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""

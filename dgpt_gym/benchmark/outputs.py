@@ -20,11 +20,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 
 from dgpt_gym.benchmark import baseline_report, report
-from dgpt_gym.benchmark.episodes import add_floor_ratios, run_episode, run_episodes
+from dgpt_gym.benchmark.episodes import add_floor_ratios
 from dgpt_gym.benchmark.plots import (
     plot_error_against_time,
     plot_scenarios,
@@ -32,15 +31,9 @@ from dgpt_gym.benchmark.plots import (
     plot_ucb_vs_ci,
     read_training_time,
 )
+from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
 from dgpt_gym.benchmark.store import ResultsStore
-from dgpt_gym.benchmark.sweep import (
-    PAPER_AS_PRINTED_TRACKERS,
-    PAPER_GP_TRACKERS,
-    Grid,
-    summarize_store,
-    sweep_units,
-)
-from dgpt_gym.registry import TrackerSpec
+from dgpt_gym.benchmark.sweep import Grid, episode_results, summarize_store, sweep_units
 
 __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_UCB_GAIN"]
 
@@ -346,12 +339,7 @@ def error_curves(units: list) -> tuple[dict[str, dict[str, np.ndarray]], str]:
             )[:ERROR_CURVE_RUNS]
             if not chosen:
                 continue
-            spec = TrackerSpec(tracker, chosen[0].entry_point)
-            envs = [gym.make("DGPTrack-v0", **unit.env_kwargs) for unit in chosen]
-            trackers = [spec.load()(**unit.tracker_kwargs) for unit in chosen]
-            results = run_episodes(envs, trackers, [unit.seed for unit in chosen])
-            for env in envs:
-                env.close()
+            results = episode_results(chosen)
             curves.setdefault(scenario, {})[tracker] = np.array(
                 [np.linalg.norm(result.mean - result.truth, axis=1) for result in results]
             )
@@ -408,10 +396,7 @@ def write_outputs(
     units = sweep_units(grids)
     unit = _figure_run(units, summaries)
     if unit is not None:
-        tracker = TrackerSpec(unit.tracker, unit.entry_point).load()(**unit.tracker_kwargs)
-        env = gym.make("DGPTrack-v0", **unit.env_kwargs)
-        result = run_episode(env, tracker, unit.seed)
-        env.close()
+        (result,) = episode_results([unit])
         settings = ", ".join(f"{key} {value}" for key, value in unit.env_kwargs.items())
         figure = plot_ucb_vs_ci(
             result, figures / "ucb_vs_ci.png", f"{unit.tracker}, {settings}, seed {unit.seed}"

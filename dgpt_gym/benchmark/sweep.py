@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 import dgpt_gym
-from dgpt_gym.benchmark.episodes import run_episodes, summarize_runs
+from dgpt_gym.benchmark.episodes import EpisodeResult, run_episodes, summarize_runs
 from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
@@ -39,6 +39,7 @@ __all__ = [
     "SweepReport",
     "run_unit",
     "run_block",
+    "episode_results",
     "make_blocks",
     "run_units",
     "DEFAULT_BATCH_SIZE",
@@ -188,6 +189,20 @@ def run_unit(unit: RunUnit) -> dict:
     return run_block((unit,))[0]
 
 
+def episode_results(units: Sequence[RunUnit]) -> list[EpisodeResult]:
+    """The per-step results of ``units`` (one tracker's runs, any cells), built from their
+    entry point and arguments and run in lockstep
+    (:func:`dgpt_gym.benchmark.episodes.run_episodes`); the environments are closed."""
+    make = TrackerSpec(units[0].tracker, units[0].entry_point).load()
+    trackers = [make(**unit.tracker_kwargs) for unit in units]
+    envs = [gym.make("DGPTrack-v0", **unit.env_kwargs) for unit in units]
+    try:
+        return run_episodes(envs, trackers, [unit.seed for unit in units])
+    finally:
+        for env in envs:
+            env.close()
+
+
 def run_block(units: Sequence[RunUnit]) -> list[dict]:
     """Run the episodes of ``units``, which share tracker and environment settings
     (:func:`make_blocks`), in lockstep (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never
@@ -197,24 +212,15 @@ def run_block(units: Sequence[RunUnit]) -> list[dict]:
     not depend on its block)."""
 
     started = time.perf_counter()
-    envs = []
     try:
-        first = units[0]
-        if any(_block_key(unit) != _block_key(first) for unit in units):
+        if any(_block_key(unit) != _block_key(units[0]) for unit in units):
             raise ValueError("a block's units must share tracker and environment settings")
-        make = TrackerSpec(first.tracker, first.entry_point).load()
-        trackers = [make(**unit.tracker_kwargs) for unit in units]
-        envs = [gym.make("DGPTrack-v0", **first.env_kwargs) for _ in units]
-        results = run_episodes(envs, trackers, [unit.seed for unit in units])
-        metrics = [result.metrics() for result in results]
+        metrics = [result.metrics() for result in episode_results(units)]
     except Exception as exception:  # a failed run is recorded, the sweep goes on
         if len(units) > 1:
             return [outcome for unit in units for outcome in run_block((unit,))]
         error = f"{type(exception).__name__}: {exception}"
         return [_outcome("failed", None, error, time.perf_counter() - started)]
-    finally:
-        for env in envs:
-            env.close()
     runtime = (time.perf_counter() - started) / len(units)
     return [_outcome("ok", row, None, runtime) for row in metrics]
 

@@ -3,13 +3,13 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import problem_spec
 
 from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
 from agents.likelihood import PoissonLikelihood
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.episodes import run_episode
-from dgpt_gym.problem import ProblemSpec
 
 LIKELIHOOD = PoissonLikelihood(
     clutter_rate=5.0, detection_rate=1.0, noise_std=1.0, sensing_area=np.pi * 50.0**2
@@ -161,7 +161,7 @@ def cv_spec(clutter_rate=0.0):
     sensors = np.array(
         [[x, y] for x in range(0, 1001, 25) for y in range(0, 1001, 25)], dtype=float
     )
-    return ProblemSpec(sensors, 50.0, 1.0, clutter_rate, 1.0, 1.0, 1000.0, "detecting", 60)
+    return problem_spec(sensors, clutter_rate=clutter_rate, n_steps=60)
 
 
 def test_cpf_converges_on_a_constant_velocity_target():

@@ -12,7 +12,7 @@ import itertools
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import mixture_moments, z_tolerance
+from conftest import mixture_moments, problem_spec, z_tolerance
 from scipy.stats import multivariate_normal
 
 from baselines.centroid import GatedCentroidTracker
@@ -30,22 +30,18 @@ from dgpt_gym import make_tracker, tracker_ids
 from dgpt_gym.benchmark import metrics
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes, run_monte_carlo
 from dgpt_gym.benchmark.windows import tuned_kwargs
-from dgpt_gym.problem import ProblemSpec
 
 H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 K_ROWS = 8  # padding size of the hand-built observations
 
 
 def make_spec(clutter_rate=0.0, noise_std=2.0, dt=0.5, detection_rate=1.0):
-    return ProblemSpec(
-        sensor_positions=np.array([[150.0, 150.0], [400.0, 300.0], [700.0, 650.0]]),
-        sensing_range=50.0,
+    return problem_spec(
+        [[150.0, 150.0], [400.0, 300.0], [700.0, 650.0]],
         noise_std=noise_std,
         clutter_rate=clutter_rate,
         detection_rate=detection_rate,
         dt=dt,
-        area=1000.0,
-        clutter_sensors="detecting",
         n_steps=100,
     )
 

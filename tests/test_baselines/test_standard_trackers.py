@@ -4,6 +4,7 @@ standard trackers with noise-free measurements (tests/test_baselines/test_pda_cl
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import problem_spec
 
 from baselines.clairvoyant import ClairvoyantFilter, redrawn_velocity_moments, singer_model
 from dgpt_gym import make_tracker, tracker_ids
@@ -131,17 +132,8 @@ def test_coverage_gap_probability_by_hand():
     """(1 - pi r^2 / area^2)^N: two sensors whose discs each cover a tenth of the area
     leave 0.9^2 = 0.81 uncovered."""
     from baselines.pda import coverage_gap_probability
-    from dgpt_gym.problem import ProblemSpec
 
-    spec = ProblemSpec(
-        sensor_positions=np.zeros((2, 2)),
-        sensing_range=float(np.sqrt(0.1 / np.pi)),
-        noise_std=1.0,
-        clutter_rate=1.0,
-        detection_rate=1.0,
-        dt=1.0,
-        area=1.0,
-        clutter_sensors="all",
-        n_steps=10,
+    spec = problem_spec(
+        np.zeros((2, 2)), sensing_range=float(np.sqrt(0.1 / np.pi)), area=1.0, clutter_sensors="all"
     )
     assert coverage_gap_probability(spec) == pytest.approx(0.81, rel=1e-12)

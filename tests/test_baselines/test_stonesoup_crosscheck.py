@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("stonesoup")
 
+from conftest import problem_spec  # noqa: E402
 from scipy import stats  # noqa: E402
 from stonesoup.hypothesiser.probability import PDAHypothesiser  # noqa: E402
 from stonesoup.models.measurement.linear import LinearGaussian  # noqa: E402
@@ -35,7 +36,6 @@ from baselines.kalman import (  # noqa: E402
     kalman_update,
     pda_update,
 )
-from dgpt_gym.problem import ProblemSpec  # noqa: E402
 from dgpt_gym.tracker import Estimate  # noqa: E402
 
 START = datetime.datetime(2026, 1, 1)
@@ -254,17 +254,7 @@ def test_batched_pda_update_equals_stonesoup_per_element():
 
 # -- the wrapper (baselines/stonesoup.py) -------------------------------------------------------
 
-SPEC = ProblemSpec(
-    sensor_positions=np.array([[100.0, 200.0], [150.0, 220.0], [400.0, 400.0]]),
-    sensing_range=50.0,
-    noise_std=2.0,
-    clutter_rate=1.0,
-    detection_rate=1.0,
-    dt=2.0,
-    area=1000.0,
-    clutter_sensors="detecting",
-    n_steps=7,
-)
+SPEC = problem_spec([[100.0, 200.0], [150.0, 220.0], [400.0, 400.0]], noise_std=2.0, dt=2.0, n_steps=7)
 K = 6
 SCANS = [
     [],

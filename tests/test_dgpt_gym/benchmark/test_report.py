@@ -156,3 +156,26 @@ def test_error_curves_are_the_per_step_errors_of_the_sweeps_runs(tmp_path):
     )
     path = plot_error_against_time(curves, tmp_path / "error.png", settings)
     assert path.stat().st_size > 1000
+
+
+def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
+    from dgpt_gym.benchmark.outputs import bounds_markdown
+
+    rows = [
+        {"tracker": "dgpt-rbcm", "scenario": "S1", "share_at_bound": 0.5,
+         "share_at_bound_signal_var": 0.25, "share_at_bound_noise_var": 0.5},
+        {"tracker": "dgpt-rbcm", "scenario": "S1", "share_at_bound": 1.0,
+         "share_at_bound_signal_var": 0.75, "share_at_bound_noise_var": 0.0},
+        {"tracker": "imm-pda", "scenario": "S1"},
+    ]
+    lines = bounds_markdown(rows)
+    # the mean over the scenario's cells, in %; imm-pda reports nothing and gets no row
+    assert "| tracker | scenario | any | signal_var | noise_var |" in lines
+    assert "| dgpt-rbcm | S1 | 75 | 50 | 25 |" in lines
+    assert not any(line.startswith("| imm-pda") for line in lines)
+    assert bounds_markdown(rows[2:]) == []
+    # the first row lacks the GP keys: the columns are the union, not the first row's keys
+    path = report.write_rows_csv([rows[2], *rows[:2]], tmp_path / "rows.csv")
+    header = path.read_text().splitlines()[0].split(",")
+    assert header == ["tracker", "scenario", "share_at_bound", "share_at_bound_signal_var",
+                      "share_at_bound_noise_var"]
