@@ -21,7 +21,9 @@ class ProblemSpec:
     """The sensor network and the measurement model, handed to trackers at reset.
 
     Model-based trackers (the hybrid filter, the CPF) use the rates and the noise level, as
-    the paper assumes them known; data-driven trackers must not use ``noise_std``.
+    the paper assumes them known; the GP models must not use ``noise_std`` (they learn
+    sigma_n). With ``clutter_sensors="all"`` DGPT's screening of clutter-only sensors and
+    its track start use the rates and ``noise_std`` (``agents/screening.py``).
 
     Attributes:
         sensor_positions: (n_sensors, 2) sensor coordinates, m.

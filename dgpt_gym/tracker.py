@@ -50,7 +50,9 @@ class Tracker(Protocol):
         """Forget the last episode; ``spec`` describes the network and measurement model."""
 
     def update(self, obs: dict) -> Estimate:
-        """Take the observation of step t and return the estimate of p_t."""
+        """Take the observation of step t (the env's dict; an optional ``"awake"`` boolean per
+        sensor marks the sensors that could report, e.g. in the RL sensor task) and return
+        the estimate of p_t."""
 
     def diagnostics(self) -> dict[str, float]:
         """Numbers the tracker reports about its own working over the episode so far (e.g.

@@ -124,6 +124,8 @@ TRACKER_ARGUMENTS = [
     ("dgpt-rbcm", {"max_iterations": -1}, "max_iterations"),
     ("dgpt-rbcm", {"gate_threshold": 0.0}, "gate_threshold"),
     ("dgpt-rbcm", {"gate_threshold": -3.0}, "gate_threshold"),
+    ("dgpt-rbcm", {"admission_probability": 0.0}, "admission_probability"),
+    ("gp", {"admission_probability": 1.5}, "admission_probability"),
     ("gp", {"window": 0}, "window"),
     ("hybrid", {"variant": "x"}, "variant"),
     ("hybrid", {"reacquire": "y"}, "reacquire"),

@@ -1,0 +1,178 @@
+"""Which reporting sensors sense the target, when every sensor reports clutter.
+
+The paper's gating (Sec. IV-C, eqs. (27)-(28)) assumes that a sensor reports only when it
+senses the target, so every reporting sensor's summary is a training point. With
+``clutter_sensors="all"`` every sensor reports Poisson clutter each step, and a sensor
+whose reports are all clutter must neither become an expert nor start a track. Both tests
+here compare, per sensor, "it senses the target" with "it reports clutter only" under the
+measurement model of Sec. VI-A (known rates, as the hybrid filter assumes): a sensing
+sensor reports a zero-truncated Poisson(lambda_T) number of target points N(x, sigma^2 I)
+plus Poisson(lambda_c) clutter uniform over its disc of area A_sen; a sensor that does not
+sense the target reports the clutter only. The likelihood ratio of a sensor's scan
+z_1..z_n for a target at x is then exactly
+
+    LR(x) = e^(-lambda_T) (prod_j (1 + lambda_T N(z_j; x, sigma^2 I) / c) - 1) / (1 - e^(-lambda_T)),
+
+with c = lambda_c / A_sen (eq. (42)'s factors divided by the clutter-only ones, minus the
+"no target point" term that the truncation removes). It is 0 for a sensor with no point
+near x: a sensor that senses the target always reports it (the detection is certain), which
+is what makes a clutter point that other sensors fail to confirm recognisable.
+
+- :func:`sensing_probability` (a track exists): the posterior probability that each
+  reporting sensor senses the target, from the prior probability that the predicted
+  target lies in its disc and LR integrated over the prediction.
+- :func:`initiation_scores` (no track): for each measurement as a candidate position, the
+  log-likelihood ratio summed over the other sensors that must sense a target there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import spatial, stats
+
+from agents.gating import group_starts
+
+__all__ = [
+    "scan_likelihood_ratio",
+    "sensing_probability",
+    "initiation_scores",
+    "disc_probability",
+]
+
+
+def scan_likelihood_ratio(
+    densities: np.ndarray,
+    groups: np.ndarray,
+    n_groups: int,
+    detection_rate: float,
+    clutter_density: float,
+) -> np.ndarray:
+    """LR of the module docstring for ``n_groups`` scans at once.
+
+    Args:
+        densities: (m,) target densities N(z_j; x, S) of the measurements that count, m^-2.
+        groups: (m,) the scan (0 .. n_groups - 1) of each; scans with none get LR 0.
+        detection_rate: lambda_T > 0.
+        clutter_density: c = lambda_c / A_sen > 0.
+    """
+    log_product = np.zeros(n_groups)
+    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
+    # e^-lT (prod - 1) / (1 - e^-lT) with the product in log space: expm1 is exact near 0
+    return np.exp(-detection_rate) * np.expm1(log_product) / -np.expm1(-detection_rate)
+
+
+def disc_probability(
+    centres: np.ndarray, radius: float, mean: np.ndarray, variance: float
+) -> np.ndarray:
+    """P(|x - centre| <= radius) for x ~ N(mean, variance I) (2-D), per centre (k, 2): the
+    non-central chi-square distribution with 2 degrees of freedom."""
+    variance = max(float(variance), 1e-12)
+    distance2 = np.sum((centres - mean) ** 2, axis=1)
+    return stats.ncx2.cdf(radius**2 / variance, 2, distance2 / variance)
+
+
+def sensing_probability(
+    points: np.ndarray,
+    sensors: np.ndarray,
+    sensor_positions: np.ndarray,
+    sensing_range: float,
+    predicted_mean: np.ndarray,
+    target_var: np.ndarray,
+    noise_var: np.ndarray,
+    detection_rate: float,
+    clutter_density: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior probability that each reporting sensor senses the target.
+
+    Args:
+        points: (n, 2) measurements; ``sensors`` (n,) their sensors.
+        sensor_positions: (n_sensors, 2); ``sensing_range``: r.
+        predicted_mean, target_var: (2,) predicted target position and its variance per axis.
+        noise_var: (2,) measurement noise variance per axis.
+        detection_rate, clutter_density: lambda_T and lambda_c / A_sen (> 0).
+
+    Returns ``(reporting sensors (k,) ascending, probability (k,))``. LR is evaluated with
+    N(z_j; mu, P + sigma^2 I) in place of N(z_j; x, sigma^2 I), exact for scans with one
+    point near the prediction; the prior is the probability that x ~ N(mu, P) (isotropic
+    with P's mean variance) lies in the sensor's disc.
+    """
+    order = np.argsort(sensors, kind="stable")
+    points, sensors = points[order], sensors[order]
+    starts = group_starts(sensors)
+    reporting = sensors[starts]
+    group = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, sensors.size]))
+    variance = np.asarray(target_var, dtype=float) + np.asarray(noise_var, dtype=float)
+    densities = np.exp(-0.5 * np.sum((points - predicted_mean) ** 2 / variance, axis=1)) / (
+        2.0 * np.pi * np.sqrt(np.prod(variance))
+    )
+    ratio = scan_likelihood_ratio(densities, group, starts.size, detection_rate, clutter_density)
+    prior = disc_probability(
+        sensor_positions[reporting], sensing_range, predicted_mean, float(np.mean(target_var))
+    )
+    # posterior odds = prior odds x LR, written to stay finite at prior 1 or LR infinite
+    evidence = prior * ratio
+    return reporting, np.where(evidence > 0, evidence / (evidence + (1.0 - prior)), 0.0)
+
+
+def initiation_scores(
+    points: np.ndarray,
+    sensors: np.ndarray,
+    sensor_positions: np.ndarray,
+    sensing_range: float,
+    noise_var: float,
+    detection_rate: float,
+    clutter_density: float,
+    awake: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Evidence that the target is at each measurement, for starting a track.
+
+    For each measurement c_i, the sensors other than its own whose discs contain every
+    point within 3 sqrt(2) sigma of c_i (distance <= r - 3 sqrt(2) sigma; a target there is
+    surely sensed by them) are the witnesses; the score is the sum of their log LR(c_i),
+    with N(z_j; c_i, 2 sigma^2 I) since c_i is itself a noisy target point. A witness with
+    no point near c_i contributes log 0 = -inf. Own sensors are not witnesses (their
+    evidence is c_i itself).
+
+    ``awake`` (boolean per sensor, default all): only sensors that could report are
+    witnesses (a sleeping sensor's silence says nothing).
+
+    Returns ``(scores (n,), witnesses (n,))``: the score (-inf when any witness disagrees,
+    0 with no witness) and the number of witnesses.
+    """
+    n = points.shape[0]
+    if n == 0:
+        return np.empty(0), np.empty(0, dtype=int)
+    pair_var = 2.0 * noise_var
+    reach = 3.0 * np.sqrt(pair_var)
+    sensor_tree = spatial.cKDTree(sensor_positions)
+    inner = max(sensing_range - reach, 0.0)
+    covering = sensor_tree.query_ball_point(points, inner)  # witnesses and own sensor
+    witness_point = np.repeat(np.arange(n), [len(row) for row in covering])
+    witness_sensor = np.fromiter(
+        (s for row in covering for s in row), dtype=np.int64, count=witness_point.size
+    )
+    keep = witness_sensor != sensors[witness_point]
+    if awake is not None:
+        keep &= np.asarray(awake, dtype=bool)[witness_sensor]
+    witness_point, witness_sensor = witness_point[keep], witness_sensor[keep]
+    witnesses = np.bincount(witness_point, minlength=n)
+    # the measurements near each candidate, by sensor
+    pairs = spatial.cKDTree(points).query_pairs(4.0 * np.sqrt(pair_var), output_type="ndarray")
+    first = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    second = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    n_sensors = sensor_positions.shape[0]
+    witness_key = witness_point * n_sensors + witness_sensor
+    pair_key = first * n_sensors + sensors[second]
+    counted = np.isin(pair_key, witness_key)
+    first, second, pair_key = first[counted], second[counted], pair_key[counted]
+    distance2 = np.sum((points[first] - points[second]) ** 2, axis=1)
+    densities = np.exp(-0.5 * distance2 / pair_var) / (2.0 * np.pi * pair_var)
+    keys, group = np.unique(pair_key, return_inverse=True)
+    ratio = scan_likelihood_ratio(densities, group, keys.size, detection_rate, clutter_density)
+    with np.errstate(divide="ignore"):
+        log_ratio = np.log(ratio)
+    scores = np.zeros(n)
+    np.add.at(scores, keys // n_sensors, log_ratio)
+    confirmed = np.bincount(keys // n_sensors, minlength=n)
+    scores[confirmed < witnesses] = -np.inf  # a witness with no point near the candidate
+    return scores, witnesses
