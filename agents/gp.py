@@ -307,9 +307,14 @@ def log_marginal_likelihood(
     if not with_gradient:
         return value, None
     inner = alpha[..., :, None] * alpha[..., None, :] - fact.inverse
-    weighted = inner * fact.kernel
-    grad_signal = 0.5 * weighted.sum(axis=(-1, -2, -3))
-    grad_lengthscales = 0.5 * np.einsum("...mab,...mabd->...d", weighted, fact.scaled)
+    # Sums over the experts' pairs as one flat, contiguous last axis: their rounding then
+    # does not depend on how many problems are batched (numpy's multi-axis sums, einsum and
+    # matmul change their loops with the batch shape), so a batch reproduces each problem
+    # alone bit for bit.
+    weighted = (inner * fact.kernel).reshape(*inner.shape[:-3], -1)
+    grad_signal = 0.5 * weighted.sum(axis=-1)
+    scaled = np.moveaxis(fact.scaled, -1, -4).reshape(*weighted.shape[:-1], -1, weighted.shape[-1])
+    grad_lengthscales = 0.5 * (weighted[..., None, :] * scaled).sum(axis=-1)
     noise = np.exp(np.asarray(log_params, dtype=float)[..., -1])
     inner_diagonal = np.diagonal(inner, axis1=-2, axis2=-1)
     grad_noise = 0.5 * noise * (inner_diagonal * data.weight).sum(axis=(-1, -2))
@@ -343,9 +348,10 @@ def predict(
         q = np.exp(np.asarray(log_params, dtype=float)[..., 0])[..., None, None, None]
         tau, tau_test = data.X[..., -1], X_test[..., -1]
         cross = q * data.ncv.unit_kernel(tau, tau_test) + data.ncv.basis_kernel(tau, tau_test)
-        prior = q[..., 0] * np.abs(tau_test) ** 3 / 3.0 + data.ncv.basis_kernel(
-            tau_test[..., None], tau_test[..., None]
-        )[..., 0, 0]
+        prior = (
+            q[..., 0] * np.abs(tau_test) ** 3 / 3.0
+            + data.ncv.basis_kernel(tau_test[..., None], tau_test[..., None])[..., 0, 0]
+        )
     cross = cross * data.weight[..., :, None]
     mean = np.einsum("...ns,...n->...s", cross, fact.alpha)
     reduction = np.einsum("...ns,...nm,...ms->...s", cross, fact.inverse, cross)

@@ -38,7 +38,15 @@ __all__ = [
 ]
 
 if "DGPTrack-v0" not in gymnasium.registry:
-    gymnasium.register(id="DGPTrack-v0", entry_point="dgpt_gym.env:DGPTrackEnv")
+    gymnasium.register(
+        id="DGPTrack-v0",
+        entry_point="dgpt_gym.env:DGPTrackEnv",
+        vector_entry_point="dgpt_gym.env:vector_env",
+    )
 for _environment in load_table(RL_ENVIRONMENT_TABLE):
     if _environment.id not in gymnasium.registry:
-        gymnasium.register(id=_environment.id, entry_point=_environment.entry_point)
+        gymnasium.register(
+            id=_environment.id,
+            entry_point=_environment.entry_point,
+            vector_entry_point=_environment.vector_entry_point,
+        )

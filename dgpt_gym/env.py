@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from functools import partial
 
 import gymnasium as gym
 import numpy as np
@@ -19,7 +20,7 @@ from dgpt_gym.rendering import Renderer
 from dgpt_gym.scenarios import Scenario, Trajectory, get_scenario
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
-__all__ = ["DGPTrackEnv", "TRAJECTORY_MODES", "OVERFLOW_PROBABILITY"]
+__all__ = ["DGPTrackEnv", "vector_env", "TRAJECTORY_MODES", "OVERFLOW_PROBABILITY"]
 
 logger = logging.getLogger(__name__)
 
@@ -240,9 +241,7 @@ class DGPTrackEnv(gym.Env):
             raise ValueError(f"options must be a dict or None; got {options!r}")
         unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)
         if unknown:
-            raise ValueError(
-                f"options has unknown keys {unknown}; allowed: {list(RESET_OPTIONS)}"
-            )
+            raise ValueError(f"options has unknown keys {unknown}; allowed: {list(RESET_OPTIONS)}")
         if "layout_seed" in options:
             layout_seed = check_integer("options['layout_seed']", options["layout_seed"], low=0)
             if layout_seed != self.layout_seed:
@@ -395,7 +394,9 @@ class DGPTrackEnv(gym.Env):
                 else None
             ),
             "new_leg": (
-                bool(trajectory.new_leg[step]) if inside and trajectory.new_leg is not None else None
+                bool(trajectory.new_leg[step])
+                if inside and trajectory.new_leg is not None
+                else None
             ),
         }
 
@@ -418,3 +419,12 @@ class DGPTrackEnv(gym.Env):
             "active_sensors": self._active[step].copy(),
             "overflow": overflow,
         }
+
+
+def vector_env(num_envs: int = 1, copy: bool = True, **env_kwargs) -> gym.vector.SyncVectorEnv:
+    """``gymnasium.make_vec("DGPTrack-v0", num_envs, vectorization_mode="vector_entry_point")``:
+    ``num_envs`` :class:`DGPTrackEnv` with ``env_kwargs`` in Gymnasium's sync vector env. A
+    step of this environment is a table lookup (the scans are drawn at reset), so there is
+    nothing to batch; the RL environments, which run a tracker inside, batch it
+    (``agents.rl.vector``)."""
+    return gym.vector.SyncVectorEnv([partial(DGPTrackEnv, **env_kwargs)] * num_envs, copy=copy)

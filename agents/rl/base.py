@@ -38,6 +38,22 @@ class TrackerInsideEnv(gym.Env, abc.ABC):
         best fixed setting is searched (:func:`agents.rl.evaluation.baseline_policies`), and
         the name of the default one. Every RL environment defines its own."""
 
+    def step(self, action):
+        """Gymnasium's step: :meth:`begin_step`, the tracker's update, :meth:`end_step`. The
+        batched vector environment (:mod:`agents.rl.vector`) runs the same two halves
+        around one :meth:`agents.dgpt.DGPT.update_batch` for all its sub-environments."""
+        return self.end_step(self.tracker.update(self.begin_step(action)))
+
+    @abc.abstractmethod
+    def begin_step(self, action) -> dict:
+        """Validate and apply ``action``; return the observation the tracker takes this
+        step."""
+
+    @abc.abstractmethod
+    def end_step(self, estimate):
+        """Score the tracker's ``estimate`` of this step; return Gymnasium's ``(observation,
+        reward, terminated, truncated, info)``."""
+
     def render(self):
         """The inner ``DGPTrack-v0`` scene: sensors, measurements, true path, estimates."""
         return self.inner.render()

@@ -11,29 +11,38 @@ __all__ = ["RLEnvironment", "ENVIRONMENTS"]
 
 class RLEnvironment(NamedTuple):
     """An RL environment: its Gymnasium id and entry point, its short name for
-    ``dgpt-train-rl --env`` and what its comparison table averages per step."""
+    ``dgpt-train-rl --env``, what its comparison table averages per step, and the creator of
+    its batched vector environment (``gymnasium.make_vec(id, num_envs,
+    vectorization_mode="vector_entry_point")``, :mod:`agents.rl.vector`)."""
 
     id: str
     entry_point: str
     alias: str
     per_step: str
+    vector_entry_point: str
 
 
 ENVIRONMENTS: tuple[RLEnvironment, ...] = (
     RLEnvironment(
-        "DGPTrackWindow-v0", "agents.rl.tuning_envs:DGPTrackWindowEnv", "window", "mean window C"
+        "DGPTrackWindow-v0",
+        "agents.rl.tuning_envs:DGPTrackWindowEnv",
+        "window",
+        "mean window C",
+        "agents.rl.vector:window_vector_env",
     ),
     RLEnvironment(
         "DGPTrackGating-v0",
         "agents.rl.tuning_envs:DGPTrackGatingEnv",
         "gating",
         "mean gate threshold",
+        "agents.rl.vector:gating_vector_env",
     ),
     RLEnvironment(
         "DGPTrackSensors-v0",
         "agents.rl.sensors_env:DGPTrackSensorsEnv",
         "sensors",
         "sensors woken per step",
+        "agents.rl.vector:sensors_vector_env",
     ),
 )
 """Every RL environment in ``agents/rl/``."""

@@ -168,18 +168,21 @@ class DGPTrackSensorsEnv(TrackerInsideEnv):
         actions = {f"nearest {n}": (np.arange(k) < n).astype(np.int8) for n in range(1, k + 1)}
         return actions, f"nearest {k}"
 
-    def step(self, action):
+    def begin_step(self, action) -> dict:
         self._check_started()
         bits = np.asarray(action).reshape(-1)
         if bits.shape != (self.n_candidates,) or not np.all((bits == 0) | (bits == 1)):
             raise ValueError(
                 f"action must be {self.n_candidates} bits (0 or 1), one per candidate; got {action!r}"
             )
-        woken_sensors = self.candidates_[bits.astype(bool)]
         woken = np.zeros(self.inner.n_sensors, dtype=bool)
-        woken[woken_sensors] = True
-        reports = filter_reports(self._pending, woken)
-        estimate = self.tracker.update(reports)
+        woken[self.candidates_[bits.astype(bool)]] = True
+        self._reports = filter_reports(self._pending, woken)
+        return self._reports
+
+    def end_step(self, estimate):
+        reports, woken = self._reports, self._reports["awake"]
+        woken_sensors = np.flatnonzero(woken)
         n_reports = int(reports["mask"].sum())
         counts = np.bincount(reports["sensor"][:n_reports], minlength=self.inner.n_sensors)
         self._last_count[woken_sensors] = counts[woken_sensors]

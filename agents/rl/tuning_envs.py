@@ -83,11 +83,13 @@ class TrackerTuningEnv(TrackerInsideEnv, abc.ABC):
         self._silent = 0
         return self._features(None), {"position": info["position"]}
 
-    def step(self, action):
+    def begin_step(self, action) -> dict:
         self._check_started()
         self._apply_action(action)
+        return self._pending
+
+    def end_step(self, estimate):
         n_measurements = int(np.sum(self._pending["mask"]))
-        estimate = self.tracker.update(self._pending)
         self._silent = 0 if n_measurements else self._silent + 1
         observation, terminated, truncated, inner_info = self._score(estimate)
         error = inner_info["error"]

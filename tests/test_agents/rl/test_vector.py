@@ -1,0 +1,67 @@
+"""Batched vector environments (agents/rl/vector.py): ``gymnasium.make_vec(...,
+vectorization_mode="vector_entry_point")`` equals N single environments step for step."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import dgpt_gym  # noqa: F401  (registers the environments)
+from agents.rl.registration import ENVIRONMENTS
+
+RL_ENVS = [environment.id for environment in ENVIRONMENTS]
+
+
+def single_rollouts(env_id, n, actions, seed, **env_kwargs):
+    """N single environments seeded seed + i, with the next-step autoreset of the vector
+    environments: the step after an episode ends resets and returns reward 0."""
+    envs = [gym.make(env_id, **env_kwargs) for _ in range(n)]
+    observations = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
+    done = [False] * n
+    trace = [(np.stack(observations), np.zeros(n))]
+    for action in actions:
+        rewards = np.zeros(n)
+        for i, env in enumerate(envs):
+            if done[i]:
+                observations[i], _ = env.reset()
+                done[i] = False
+                continue
+            observations[i], rewards[i], terminated, truncated, _ = env.step(action[i])
+            done[i] = terminated or truncated
+        trace.append((np.stack(observations), rewards))
+    return trace
+
+
+@pytest.mark.parametrize("env_id", RL_ENVS)
+def test_the_batched_vector_env_equals_single_envs_step_for_step(env_id):
+    """Eight sub-environments over 160 steps, so that the shortest scenario's episodes
+    (100 steps) end and autoreset; random actions make the trackers' windows, gates and
+    sensors differ, so the batched learning mixes different problems. Bit for bit."""
+    n, steps, env_kwargs = 8, 160, {"scenario": "S3", "clutter_rate": 5.0}
+    vector = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **env_kwargs)
+    vector.action_space.seed(5)
+    actions = [vector.action_space.sample() for _ in range(steps)]
+    observations, _ = vector.reset(seed=11)
+    trace = [(observations, np.zeros(n))]
+    for action in actions:
+        observations, rewards, *_ = vector.step(action)
+        trace.append((observations, rewards))
+    expected = single_rollouts(env_id, n, actions, 11, **env_kwargs)
+    for (got_obs, got_rewards), (want_obs, want_rewards) in zip(trace, expected):
+        np.testing.assert_array_equal(got_obs, want_obs)
+        np.testing.assert_array_equal(got_rewards, want_rewards)
+    assert vector.unwrapped.envs[0].unwrapped.inner.n_steps < steps  # an autoreset happened
+
+
+@pytest.mark.parametrize("env_id", [*RL_ENVS, "DGPTrack-v0"])
+def test_every_environment_has_a_vector_entry_point(env_id):
+    vector = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
+    sync = gym.make_vec(env_id, num_envs=3, vectorization_mode="sync")
+    assert vector.single_observation_space == sync.single_observation_space
+    assert vector.single_action_space == sync.single_action_space
+    first, _ = vector.reset(seed=2)
+    second, _ = sync.reset(seed=2)
+    if isinstance(first, dict):
+        for key in first:
+            np.testing.assert_array_equal(first[key], second[key])
+    else:
+        np.testing.assert_array_equal(first, second)
