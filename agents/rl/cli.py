@@ -134,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         env_id,
         agent.model,
         env_kwargs,
+        agent.normalizer,
         evaluation_seeds=range(args.eval_episodes),
         progress=not args.no_progress,
     )

@@ -55,12 +55,16 @@ class RandomPolicy:
 
 
 class ModelPolicy:
-    """A Stable-Baselines3 model's deterministic action."""
+    """A Stable-Baselines3 model's deterministic action; ``normalizer`` (the training
+    ``VecNormalize``, frozen) normalises the observation first, as in training."""
 
-    def __init__(self, model) -> None:
+    def __init__(self, model, normalizer=None) -> None:
         self.model = model
+        self.normalizer = normalizer
 
     def predict(self, observation):
+        if self.normalizer is not None:
+            observation = self.normalizer.normalize_obs(observation)
         action, _ = self.model.predict(observation, deterministic=True)
         return action
 

@@ -44,5 +44,12 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         "sensors woken per step",
         "agents.rl.vector:sensors_vector_env",
     ),
+    RLEnvironment(
+        "DGPTrackSensors-v1",
+        "agents.rl.sensors_v1:DGPTrackSensorsV1Env",
+        "sensors-v1",
+        "sensors woken per step",
+        "agents.rl.vector:sensors_v1_vector_env",
+    ),
 )
 """Every RL environment in ``agents/rl/``."""

@@ -12,6 +12,7 @@ import csv
 import importlib.util
 import inspect
 import json
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +30,7 @@ from agents.rl.evaluation import (
     summarize_episodes,
 )
 from agents.rl.registration import ENVIRONMENTS
+from agents.rl.vector import stable_baselines_vec_env
 from dgpt_gym.benchmark.plots import new_figure, save_figure
 from dgpt_gym.validation import check_bool, check_choice, check_integer
 
@@ -48,6 +50,9 @@ RL_ENV_IDS = tuple(environment.id for environment in ENVIRONMENTS)
 ALGORITHMS = ("ppo", "a2c", "dqn")
 TRAINING_ENV_SEED = 10_000
 """Training environments are seeded from here: far from the evaluation seeds."""
+
+NORMALIZATION_FILE = "vecnormalize.pkl"
+"""The ``VecNormalize`` statistics saved beside ``model.zip``."""
 
 
 def _algorithm_class(algo: str):
@@ -106,9 +111,13 @@ def _progress_callback(total: int, enabled: bool):
 
 @dataclass(frozen=True)
 class TrainedAgent:
+    """A trained model, where it is saved, its configuration, and its observation
+    normalisation (the training ``VecNormalize``, or None)."""
+
     model: object
     model_path: Path
     config: dict
+    normalizer: object = None
 
 
 def train_agent(
@@ -122,15 +131,21 @@ def train_agent(
     algo_kwargs: dict | None = None,
     progress: bool = True,
     torch_threads: int = 1,
+    normalize: bool = True,
 ) -> TrainedAgent:
-    """Train ``algo`` on ``env_id`` for ``timesteps`` steps over ``n_envs`` vectorized
-    environments (each wrapped in a Monitor that logs to ``out/monitor``); save
-    ``out/model.zip`` and ``out/config.json``. TensorBoard logs go to ``out/tensorboard``
+    """Train ``algo`` on ``env_id`` for ``timesteps`` steps over ``n_envs`` environments whose
+    trackers step in lockstep (:func:`agents.rl.vector.stable_baselines_vec_env`; a
+    ``VecMonitor`` logs the episodes to ``out/monitor``); save ``out/model.zip`` and
+    ``out/config.json``. ``normalize``: observations and rewards go through SB3's
+    ``VecNormalize`` (unnormalised returns of -100 to -1000 gave value losses of ~4e4 and
+    policy steps ~1000x too small), whose statistics are saved as ``out/vecnormalize.pkl``
+    and applied to observations wherever the model acts (:func:`load_agent`,
+    :class:`agents.rl.evaluation.ModelPolicy`). TensorBoard logs go to ``out/tensorboard``
     when tensorboard is installed. ``torch_threads``: the policy networks are tiny, and
     more than one torch or BLAS thread only adds synchronisation (``torch.set_num_threads``,
     ``threadpoolctl``); both limits stay set for the process."""
     import torch
-    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     check_choice("env", env_id, RL_ENV_IDS)
     check_choice("algo", algo, ALGORITHMS)
@@ -149,13 +164,11 @@ def train_agent(
     threadpool_limits(limits=1)  # numpy's BLAS too: the trackers' matrices are tiny
     out = Path(out)
     (out / "monitor").mkdir(parents=True, exist_ok=True)
-    venv = make_vec_env(
-        env_id,
-        n_envs=n_envs,
-        seed=TRAINING_ENV_SEED + seed * n_envs,
-        env_kwargs=env_kwargs,
-        monitor_dir=str(out / "monitor"),
-    )
+    check_bool("normalize", normalize)
+    venv = stable_baselines_vec_env(env_id, n_envs, TRAINING_ENV_SEED + seed * n_envs, env_kwargs)
+    venv = VecMonitor(venv, filename=str(out / "monitor" / "train"))
+    if normalize:
+        venv = VecNormalize(venv)
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
     algorithm = _algorithm_class(algo)
     algo_kwargs = check_algo_kwargs(algorithm, algo_kwargs)
@@ -169,9 +182,13 @@ def train_agent(
         venv.close()
         if not algo_kwargs:
             raise
-        raise ValueError(f"algo_kwargs {algo_kwargs} rejected by {algorithm.__name__}: {error}") from None
+        raise ValueError(
+            f"algo_kwargs {algo_kwargs} rejected by {algorithm.__name__}: {error}"
+        ) from None
     model_path = out / "model.zip"
     model.save(model_path)
+    if normalize:
+        venv.save(str(out / NORMALIZATION_FILE))
     config = {
         "env": env_id,
         "env_kwargs": env_kwargs,
@@ -181,30 +198,47 @@ def train_agent(
         "seed": seed,
         "n_envs": n_envs,
         "training_env_seed": TRAINING_ENV_SEED + seed * n_envs,
+        "normalize": normalize,
     }
     (out / "config.json").write_text(json.dumps(config, indent=1) + "\n")
     venv.close()
-    return TrainedAgent(model, model_path, config)
+    return TrainedAgent(model, model_path, config, venv if normalize else None)
+
+
+def load_normalization(out: str | Path):
+    """The ``VecNormalize`` statistics saved by :func:`train_agent` in ``out`` (frozen), or
+    None if the agent was trained without normalisation."""
+    path = Path(out) / NORMALIZATION_FILE
+    if not path.exists():
+        return None
+    with path.open("rb") as handle:
+        normalizer = pickle.load(handle)  # SB3's own format (VecNormalize.save)
+    normalizer.training, normalizer.norm_reward = False, False
+    return normalizer
 
 
 def load_agent(out: str | Path):
-    """The model and configuration saved by :func:`train_agent` in ``out``."""
+    """The model and configuration saved by :func:`train_agent` in ``out``, with the
+    observation normalisation (``config["normalizer"]``, None without)."""
     out = Path(out)
     config = json.loads((out / "config.json").read_text())
-    return _algorithm_class(config["algo"]).load(out / "model.zip"), config
+    model = _algorithm_class(config["algo"]).load(out / "model.zip")
+    return model, {**config, "normalizer": load_normalization(out)}
 
 
 def compare_with_baselines(
     env_id: str,
     model,
     env_kwargs: dict | None = None,
+    normalizer=None,
     training_seeds=TRAINING_SEEDS,
     evaluation_seeds=EVALUATION_SEEDS,
     progress: bool = True,
 ) -> list[dict]:
-    """Rows (name, role, :func:`summarize_episodes`) for the trained agent, the best fixed
-    baseline (grid search on ``training_seeds``), the default baseline, every other fixed
-    baseline and a random policy, all on ``evaluation_seeds``."""
+    """Rows (name, role, :func:`summarize_episodes`) for the trained agent (its observations
+    normalised by ``normalizer`` if given), the best fixed baseline (grid search on
+    ``training_seeds``), the default baseline, every other fixed baseline and a random
+    policy, all on ``evaluation_seeds``."""
     from tqdm.auto import tqdm
 
     env = gym.make(env_id, **(env_kwargs or {}))
@@ -214,7 +248,7 @@ def compare_with_baselines(
         for name, policy in tqdm(policies.items(), desc="best fixed baseline", disable=not progress)
     }
     best = max(search, key=search.get)
-    candidates = [("trained agent", "agent", ModelPolicy(model))]
+    candidates = [("trained agent", "agent", ModelPolicy(model, normalizer))]
     if default == best:
         candidates.append((best, "best fixed (training seeds) and default", policies[best]))
     else:

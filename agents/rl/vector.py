@@ -16,12 +16,14 @@ from __future__ import annotations
 
 from functools import partial
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.vector.utils import concatenate, iterate
 
 from agents.rl.base import TrackerInsideEnv
 from agents.rl.sensors_env import DGPTrackSensorsEnv
+from agents.rl.sensors_v1 import DGPTrackSensorsV1Env
 from agents.rl.tuning_envs import DGPTrackGatingEnv, DGPTrackWindowEnv
 
 __all__ = [
@@ -29,6 +31,9 @@ __all__ = [
     "window_vector_env",
     "gating_vector_env",
     "sensors_vector_env",
+    "sensors_v1_vector_env",
+    "stable_baselines_vec_env",
+    "EpisodeStepLimit",
 ]
 
 
@@ -37,13 +42,18 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
     docstring). Next-step autoreset, as :class:`~gymnasium.vector.SyncVectorEnv` by default:
     the step after an episode ends resets that sub-environment and returns reward 0."""
 
-    def __init__(self, env_fns, copy: bool = True) -> None:
+    def __init__(self, env_fns, copy: bool = True, max_episode_steps: int | None = None) -> None:
         super().__init__(env_fns, copy=copy, autoreset_mode=AutoresetMode.NEXT_STEP)
         for env in self.envs:
             if not isinstance(env.unwrapped, TrackerInsideEnv):
                 raise TypeError(
                     f"env_fns must make TrackerInsideEnv environments; got {type(env.unwrapped)}"
                 )
+        self.time_limit = EpisodeStepLimit(self.num_envs, max_episode_steps)
+
+    def reset(self, *, seed=None, options=None):
+        self.time_limit.restart(range(self.num_envs))
+        return super().reset(seed=seed, options=options)
 
     def step(self, actions):
         actions = list(iterate(self.action_space, actions))
@@ -52,6 +62,7 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
         stepping, tracker_observations = [], []
         for i, env in enumerate(self.envs):
             if self._autoreset_envs[i]:
+                self.time_limit.restart([i])
                 self._env_obs[i], env_infos[i] = env.reset()
                 self._rewards[i] = 0.0
                 self._terminations[i] = False
@@ -70,6 +81,7 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
                     self._truncations[i],
                     env_infos[i],
                 ) = self.envs[i].unwrapped.end_step(estimate)
+                self._truncations[i] |= self.time_limit.count(i)
         for i, env_info in enumerate(env_infos):
             infos = self._add_info(infos, env_info, i)
         self._observations = concatenate(
@@ -85,9 +97,30 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
         )
 
 
+class EpisodeStepLimit:
+    """Gymnasium's ``TimeLimit`` for batched sub-environments, whose ``begin_step`` /
+    ``end_step`` bypass the wrapper: counts each one's steps since its reset."""
+
+    def __init__(self, num_envs: int, max_episode_steps: int | None) -> None:
+        self.max_episode_steps = max_episode_steps
+        self.elapsed = np.zeros(num_envs, dtype=int)
+
+    def restart(self, indices) -> None:
+        self.elapsed[list(indices)] = 0
+
+    def count(self, index: int) -> bool:
+        """One more step of sub-environment ``index``; True when that reaches the limit."""
+        self.elapsed[index] += 1
+        return self.max_episode_steps is not None and self.elapsed[index] >= self.max_episode_steps
+
+
 def _creator(env_class):
-    def create(num_envs: int = 1, copy: bool = True, **env_kwargs) -> TrackerInsideVectorEnv:
-        return TrackerInsideVectorEnv([partial(env_class, **env_kwargs)] * num_envs, copy=copy)
+    def create(
+        num_envs: int = 1, copy: bool = True, max_episode_steps: int | None = None, **env_kwargs
+    ) -> TrackerInsideVectorEnv:
+        return TrackerInsideVectorEnv(
+            [partial(env_class, **env_kwargs)] * num_envs, copy, max_episode_steps
+        )
 
     create.__doc__ = (
         f"``num_envs`` :class:`~{env_class.__module__}.{env_class.__name__}` stepped in "
@@ -99,3 +132,54 @@ def _creator(env_class):
 window_vector_env = _creator(DGPTrackWindowEnv)
 gating_vector_env = _creator(DGPTrackGatingEnv)
 sensors_vector_env = _creator(DGPTrackSensorsEnv)
+sensors_v1_vector_env = _creator(DGPTrackSensorsV1Env)
+
+
+def stable_baselines_vec_env(env_id: str, n_envs: int, seed: int, env_kwargs: dict | None = None):
+    """A Stable-Baselines3 ``VecEnv`` over ``n_envs`` environments ``env_id`` whose trackers
+    step in lockstep, as :class:`TrackerInsideVectorEnv` does: SB3's ``DummyVecEnv``
+    (seeding, buffers, attribute access) with a ``step_wait`` that runs every
+    sub-environment's ``begin_step``, one ``update_batch``, then each ``end_step``, and
+    SB3's same-step autoreset (``terminal_observation`` and ``TimeLimit.truncated`` in the
+    infos). Sub-environment i is seeded ``seed + i`` at the first reset. Episode statistics
+    come from ``VecMonitor`` on top (the sub-environments carry no ``Monitor``, whose
+    ``step`` the batched step bypasses). Needs the 'rl' extra."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    class BatchedDummyVecEnv(DummyVecEnv):
+        def reset(self):
+            self.time_limit.restart(range(self.num_envs))
+            return super().reset()
+
+        def step_wait(self):
+            envs = [env.unwrapped for env in self.envs]
+            inputs = [env.begin_step(action) for env, action in zip(envs, self.actions)]
+            trackers = [env.tracker for env in envs]
+            estimates = type(trackers[0]).update_batch(trackers, inputs)
+            for index, (env, estimate) in enumerate(zip(envs, estimates)):
+                observation, reward, terminated, truncated, info = env.end_step(estimate)
+                truncated = truncated or self.time_limit.count(index)
+                self.buf_rews[index] = reward
+                self.buf_infos[index] = info
+                self.buf_dones[index] = terminated or truncated
+                info["TimeLimit.truncated"] = truncated and not terminated
+                if self.buf_dones[index]:
+                    info["terminal_observation"] = observation
+                    self.time_limit.restart([index])
+                    observation, self.reset_infos[index] = self.envs[index].reset()
+                self._save_obs(index, observation)
+            return (
+                self._obs_from_buf(),
+                np.copy(self.buf_rews),
+                np.copy(self.buf_dones),
+                [dict(info) for info in self.buf_infos],
+            )
+
+    env_kwargs = dict(env_kwargs or {})
+    venv = BatchedDummyVecEnv([partial(gym.make, env_id, **env_kwargs)] * n_envs)
+    for env in venv.envs:
+        if not isinstance(env.unwrapped, TrackerInsideEnv):
+            raise ValueError(f"env_id must name an RL environment of agents.rl; got {env_id!r}")
+    venv.time_limit = EpisodeStepLimit(n_envs, venv.envs[0].spec.max_episode_steps)
+    venv.seed(seed)
+    return venv

@@ -16,6 +16,9 @@
 - lockstep: seconds per episode of the GP trackers run one episode at a time
   (``run_episode``) and in a lockstep block (``run_episodes``, the sweep's way), on the same
   seeds, checking that the numbers are identical; the ratio is the sweep's speed-up.
+- vector-env: steps per second of every RL environment with 8 sub-environments, Gymnasium's
+  sync vector env against the batched one (``vectorization_mode="vector_entry_point"``, the
+  trackers stepped through one ``update_batch``), checking the returns are equal. Goal >= 5.
 - training-time: the paper's Sec. VII-A experiment (Fig. 2): f(x) = 5 x1^2 + sin(12 x2),
   sigma_z = 0.5; likelihood + gradient of the full GP and of DGP with M = 2, 5, 10, 20
   experts, N = 500 .. 10000; writes docs/training_time.csv and docs/figures/training_time.png.
@@ -37,11 +40,18 @@ import dgpt_gym
 from agents import gp
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
 from dgpt_gym.benchmark.plots import plot_training_time
-from dgpt_gym.registry import make_tracker
+from dgpt_gym.registry import load_table, make_tracker
 
 DOCS = Path("docs")
 SECTIONS = [
-    "env", "dgpt-step", "cpf-hybrid", "standard", "lockstep", "sklearn", "training-time"
+    "env",
+    "dgpt-step",
+    "cpf-hybrid",
+    "standard",
+    "lockstep",
+    "vector-env",
+    "sklearn",
+    "training-time",
 ]
 
 
@@ -156,6 +166,35 @@ def bench_lockstep(episodes: int) -> dict:
     return results
 
 
+def bench_vector_envs(num_envs: int, n_steps: int, env_ids: list[str]) -> dict:
+    """Steps per second of ``num_envs`` sub-environments, Gymnasium's sync vector env against
+    the batched one (``vectorization_mode="vector_entry_point"``), the same random actions
+    and seeds, each timed after one warm-up step; the returns are checked to be equal."""
+    results = {}
+    for env_id in env_ids:
+        rates, returns = {}, {}
+        for mode in ("sync", "vector_entry_point"):
+            envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
+            envs.action_space.seed(0)
+            actions = [envs.action_space.sample() for _ in range(n_steps + 1)]
+            envs.reset(seed=0)
+            total = envs.step(actions[0])[1].sum()
+            started = time.perf_counter()
+            for action in actions[1:]:
+                total += envs.step(action)[1].sum()
+            rates[mode] = num_envs * n_steps / (time.perf_counter() - started)
+            returns[mode] = total
+            envs.close()
+        assert returns["sync"] == returns["vector_entry_point"], (
+            "the batched env changed the numbers"
+        )
+        results[f"{env_id}: sync / batched steps/s = speed-up"] = (
+            f"{rates['sync']:.0f} / {rates['vector_entry_point']:.0f} = "
+            f"{rates['vector_entry_point'] / rates['sync']:.2f}"
+        )
+    return results
+
+
 def paper_function_data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Sec. VII-A: x uniform in [0, 1]^2, z = 5 x1^2 + sin(12 x2) + N(0, 0.5^2)."""
     x = rng.uniform(size=(n, 2))
@@ -244,6 +283,9 @@ def main(argv: list[str] | None = None) -> int:
         "--episodes", type=int, default=10, help="episodes of the DGPT step benchmark"
     )
     parser.add_argument(
+        "--vector-steps", type=int, default=300, help="vector steps of the vector-env section"
+    )
+    parser.add_argument(
         "--full-gp-max", type=int, default=10000, help="largest N of the full GP in training-time"
     )
     args = parser.parse_args(argv)
@@ -275,6 +317,11 @@ def main(argv: list[str] | None = None) -> int:
         )
         for key, value in bench_lockstep(blocks).items():
             print(f"{key}: {value}")
+    if "vector-env" in args.only:
+        env_ids = [environment.id for environment in load_table(dgpt_gym.RL_ENVIRONMENT_TABLE)]
+        print(f"\n## RL vector environments, 8 sub-environments, {args.vector_steps} steps")
+        for key, value in bench_vector_envs(8, args.vector_steps, env_ids).items():
+            print(f"{key}: {value}")
     if "sklearn" in args.only:
         print("\n## full-GP log marginal likelihood + gradient versus scikit-learn")
         for key, value in bench_sklearn([1000, 2000, 4000], repeats=3).items():
@@ -297,4 +344,3 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {n} | " + " | ".join(cells) + f" | {speedup} |")
         print("wrote docs/training_time.csv and docs/figures/training_time.png")
     return 0
-

@@ -1,0 +1,66 @@
+"""Adaptive rules for ``DGPTrackSensors-v1`` that read only the observation, the baselines a
+learned agent has to beat (:mod:`agents.rl.sensors_v1` documents the observation)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, WAKE_COUNTS
+
+__all__ = ["UncertaintyRadiusPolicy", "SilenceSearchPolicy", "level_for", "HEURISTIC_GRIDS"]
+
+_COUNTS = np.array([len(WAKE_COUNTS) * 1000 if c is None else c for c in WAKE_COUNTS])
+
+
+def level_for(count: int) -> int:
+    """The action waking the fewest sensors that still wakes at least ``count``."""
+    return int(np.searchsorted(_COUNTS, count))
+
+
+def _decode(observation: np.ndarray):
+    """Distances of the 16 nearest charged sensors (in sensing ranges), the predictive
+    standard deviation (m, the larger axis), the silent steps / 10 and the count of charged
+    sensors within r + 2 sigma."""
+    observation = np.asarray(observation, dtype=float)
+    distances = observation[0 : 3 * OBSERVED_CANDIDATES : 3]
+    tail = observation[3 * OBSERVED_CANDIDATES :]
+    sigma = float(np.max(np.expm1(6.0 * tail[0:2])))
+    return distances, sigma, tail[5], tail[8] * 64.0
+
+
+class UncertaintyRadiusPolicy:
+    """Wake the charged sensors within ``range + k sigma`` of the prediction (sigma its
+    larger predictive standard deviation), at least one; beyond the 16 observed sensors it
+    counts with the observation's r + 2 sigma count."""
+
+    def __init__(self, k: float, sensing_range: float = 50.0) -> None:
+        self.k, self.sensing_range = float(k), float(sensing_range)
+
+    def predict(self, observation):
+        distances, sigma, _, within_two_sigma = _decode(observation)
+        radius = (self.sensing_range + self.k * sigma) / self.sensing_range
+        count = int(np.sum(distances <= radius))
+        if count == OBSERVED_CANDIDATES and self.k >= 2.0:
+            count = max(count, int(round(within_two_sigma)))
+        return level_for(max(count, 1))
+
+
+class SilenceSearchPolicy:
+    """Wake the nearest ``n``; after ``silent`` steps in a row without a report, wake every
+    charged sensor (search) until one reports again."""
+
+    def __init__(self, n: int, silent: int) -> None:
+        self.n, self.silent = int(n), int(silent)
+
+    def predict(self, observation):
+        _, _, silent_tenths, _ = _decode(observation)
+        if round(silent_tenths * 10.0) >= self.silent:
+            return len(WAKE_COUNTS) - 1
+        return level_for(self.n)
+
+
+HEURISTIC_GRIDS = {
+    "uncertainty radius": [{"k": k} for k in (0.0, 0.5, 1.0, 2.0, 3.0)],
+    "silence search": [{"n": n, "silent": s} for n in (2, 4, 8) for s in (1, 2, 4)],
+}
+"""The settings each rule is tuned over on training seeds."""

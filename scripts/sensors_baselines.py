@@ -1,0 +1,211 @@
+"""The baselines of DGPTrackSensors-v1 on held-out seeds and layouts, with IQM intervals.
+
+1. Tunes the adaptive rules of ``agents/rl/heuristics.py`` on training seeds (1000 onwards,
+   random paths in layouts drawn from those seeds): the setting with the best mean return.
+2. Runs every policy on the evaluation seeds 0..N-1 (paths and layouts no training episode
+   used): waking the nearest n for every n, waking all, a random policy, the tuned rules.
+3. Writes docs/rl_sensors_v1.md (interquartile mean of the return with a 95 % bootstrap
+   interval, mean NRMSE, sensors woken per step, and the paired difference to the best
+   rule seed by seed) and docs/figures/rl_sensors_v1_pareto.png (sensors woken per step
+   against the mean error, every policy).
+
+    python scripts/sensors_baselines.py                      # S1, clutter 5, 100 seeds
+    python scripts/sensors_baselines.py --seeds 20 --training-seeds 10
+
+One environment configuration is one task, so rliable's stratified bootstrap reduces to a
+plain bootstrap over episodes: ``scipy.stats.bootstrap`` of the 25 %-trimmed mean gives the
+same interval without another dependency.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+
+import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.evaluation import ConstantPolicy, RandomPolicy, run_policy_episode  # noqa: E402
+from agents.rl.heuristics import (  # noqa: E402
+    HEURISTIC_GRIDS,
+    SilenceSearchPolicy,
+    UncertaintyRadiusPolicy,
+)
+
+ENV_ID = "DGPTrackSensors-v1"
+RULES = {"uncertainty radius": UncertaintyRadiusPolicy, "silence search": SilenceSearchPolicy}
+
+
+def make_policy(kind: str, setting, env: gym.Env, seed: int):
+    if kind == "constant":
+        return ConstantPolicy(setting)
+    if kind == "random":
+        return RandomPolicy(env.action_space, seed=seed)
+    return RULES[kind](**setting)
+
+
+def run_block(task):
+    """Episodes of one policy on some seeds (a worker's unit)."""
+    kind, setting, env_kwargs, seeds = task
+    env = gym.make(ENV_ID, **env_kwargs)
+    rows = []
+    for seed in seeds:
+        policy = make_policy(kind, setting, env, seed)
+        rows.append(run_policy_episode(env, policy, seed))
+    return rows
+
+
+def run_all(tasks, workers):
+    if workers == 1:
+        return [run_block(task) for task in tasks]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(run_block, tasks))
+
+
+def iqm_interval(values: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
+    """Interquartile mean and its 95 % percentile-bootstrap interval (2000 resamples)."""
+    iqm = float(stats.trim_mean(values, 0.25))
+    result = stats.bootstrap(
+        (values,),
+        lambda x, axis: stats.trim_mean(x, 0.25, axis=axis),
+        n_resamples=2000,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    return iqm, float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def paired_interval(differences: np.ndarray) -> tuple[float, float]:
+    """Mean of paired differences and the half-width of its Student-t 95 % interval."""
+    sem = differences.std(ddof=1) / np.sqrt(differences.size)
+    return float(differences.mean()), float(sem * stats.t.ppf(0.975, differences.size - 1))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
+    parser.add_argument("--training-seeds", type=int, default=20, help="seeds 1000..")
+    parser.add_argument("--scenario", default="S1")
+    parser.add_argument("--clutter-rate", type=float, default=5.0)
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--out", type=Path, default=ROOT / "docs")
+    args = parser.parse_args(argv)
+    env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
+    env = gym.make(ENV_ID, **env_kwargs)
+    constants, _ = env.unwrapped.fixed_actions()
+
+    # 1. the rules' settings on training seeds
+    training = list(range(1000, 1000 + args.training_seeds))
+    tuning = [(kind, setting) for kind, grid in HEURISTIC_GRIDS.items() for setting in grid]
+    results = run_all([(k, s, env_kwargs, training) for k, s in tuning], args.workers)
+    best = {}
+    for (kind, setting), rows in zip(tuning, results):
+        score = float(np.mean([row["return"] for row in rows]))
+        print(f"training  {kind:20s} {setting}: mean return {score:.2f}")
+        if kind not in best or score > best[kind][1]:
+            best[kind] = (setting, score)
+
+    # 2. every policy on the evaluation seeds
+    evaluation = list(range(args.seeds))
+    policies = {name: ("constant", action) for name, action in constants.items()}
+    policies["random"] = ("random", None)
+    for kind, (setting, _) in best.items():
+        label = ", ".join(f"{key}={value}" for key, value in setting.items())
+        policies[f"{kind} ({label})"] = (kind, setting)
+    names = list(policies)
+    results = run_all([(*policies[name], env_kwargs, evaluation) for name in names], args.workers)
+    by_name = dict(zip(names, results))
+    best_rule = max(
+        (name for name in names if policies[name][0] in RULES),
+        key=lambda name: np.mean([row["return"] for row in by_name[name]]),
+    )
+
+    # 3. the table and the figure
+    lines = [
+        f"# DGPTrackSensors-v1 baselines ({args.scenario}, clutter rate {args.clutter_rate:g})",
+        "",
+        "Generated by `python scripts/sensors_baselines.py"
+        + (f" --seeds {args.seeds}" if args.seeds != 100 else "")
+        + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
+        + "`. The rules were tuned on training seeds "
+        f"1000-{999 + args.training_seeds}; every row is on the evaluation seeds 0-{args.seeds - 1} "
+        "(random paths in layouts no training episode used). IQM: interquartile mean of the "
+        "episode returns with a 95 % bootstrap interval; paired: the mean per-seed return "
+        f"difference to **{best_rule}** (the best rule) with a 95 % t interval.",
+        "",
+        "| policy | IQM return [95 % CI] | mean return | NRMSE % | sensors per step | paired - best rule |",
+        "|---|---|---|---|---|---|",
+    ]
+    reference = np.array([row["return"] for row in by_name[best_rule]])
+    points = []
+    for name in names:
+        rows = by_name[name]
+        returns = np.array([row["return"] for row in rows])
+        iqm, low, high = iqm_interval(returns)
+        difference, half = paired_interval(returns - reference)
+        per_step = float(np.mean([row["per_step"] for row in rows]))
+        error = float(np.mean([row["mean_error"] for row in rows]))
+        nrmse = 100 * float(np.mean([row["nrmse"] for row in rows]))
+        paired = "-" if name == best_rule else f"{difference:+.1f} +- {half:.1f}"
+        lines.append(
+            f"| {name} | {iqm:.1f} [{low:.1f}, {high:.1f}] | {returns.mean():.1f} | "
+            f"{nrmse:.2f} | {per_step:.1f} | {paired} |"
+        )
+        points.append((name, per_step, error))
+    text = "\n".join(lines) + "\n"
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "rl_sensors_v1.md").write_text(text)
+    print(text)
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(6.5, 4.2))
+    for name, per_step, error in points:
+        kind = policies[name][0]
+        marker = {"constant": "o", "random": "x"}.get(kind, "*")
+        axis.scatter(per_step, error, marker=marker, s=60 if marker == "*" else 25)
+        if kind != "constant" or name in (
+            "nearest 1",
+            "nearest 4",
+            "nearest 8",
+            "nearest 16",
+            "all",
+        ):
+            axis.annotate(
+                name.split(" (")[0],
+                (per_step, error),
+                fontsize=7,
+                xytext=(4, 2),
+                textcoords="offset points",
+            )
+    axis.set_xscale("symlog", linthresh=1)
+    axis.set_yscale("log")
+    axis.set_xlabel("sensors woken per step")
+    axis.set_ylabel("mean error, m")
+    axis.set_title(
+        f"DGPTrackSensors-v1, {args.scenario}, clutter {args.clutter_rate:g}, "
+        f"seeds 0-{args.seeds - 1}"
+    )
+    axis.grid(alpha=0.3)
+    figure.tight_layout()
+    path = args.out / "figures" / "rl_sensors_v1_pareto.png"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    print(f"wrote {args.out / 'rl_sensors_v1.md'} and {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,119 @@
+"""DGPTrackSensors-v1 (agents/rl/sensors_v1.py): checkers, determinism, held-out layouts,
+reward and energy accounting recomputed from what the environment reports, and
+re-acquisition of a lost track."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gymnasium_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import dgpt_gym  # noqa: F401  (registers the environments)
+from agents.rl.sensors_v1 import WAKE_COUNTS
+
+ENV_ID = "DGPTrackSensors-v1"
+ALL = len(WAKE_COUNTS) - 1
+NEAREST = {count: index for index, count in enumerate(WAKE_COUNTS)}
+
+
+def test_checkers_pass_and_the_same_seed_gives_the_same_episode():
+    env = gym.make(ENV_ID, scenario="S2", clutter_rate=5.0)
+    gymnasium_check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=False)
+    env.action_space.seed(1)
+    actions = [env.action_space.sample() for _ in range(30)]
+
+    def rollout(seed):
+        observation, _ = env.reset(seed=seed)
+        trace = [observation]
+        for action in actions:
+            observation, reward, *_ = env.step(action)
+            trace.append(np.r_[observation, reward])
+        return np.concatenate(trace)
+
+    np.testing.assert_array_equal(rollout(4), rollout(4))
+    assert not np.array_equal(rollout(4), rollout(5))
+
+
+def test_each_seed_has_its_own_layout_and_path():
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=3)
+    layout, path = env.inner.network.positions.copy(), env.inner.trajectory_.positions.copy()
+    env.reset(seed=1003)
+    assert not np.array_equal(layout, env.inner.network.positions)
+    assert not np.array_equal(path[:10], env.inner.trajectory_.positions[:10])
+    env.reset(seed=3)
+    np.testing.assert_array_equal(layout, env.inner.network.positions)
+    env.reset()  # an autoreset without a seed draws a layout above the evaluation seeds
+    assert env.inner.layout_seed >= 1000
+
+
+def test_reward_and_energy_accounting():
+    """Known actions; the woken set is checked to be the n charged sensors nearest the
+    prediction, and energy, batteries and reward are recomputed from it."""
+    env = gym.make(ENV_ID, scenario="S1", wake_energy=0.02, startup_energy=0.05).unwrapped
+    env.reset(seed=0)
+    positions = env.inner.network.positions
+    battery = np.ones(positions.shape[0])
+    awake = np.zeros(positions.shape[0], dtype=bool)
+    plan = [NEAREST[4], NEAREST[4], NEAREST[0], NEAREST[8], ALL, NEAREST[2]] * 8
+    for action in plan:
+        predicted = env._predicted.copy()
+        count = WAKE_COUNTS[action]
+        charged = np.flatnonzero(battery >= 0.02 + np.where(awake, 0.0, 0.05) - 1e-12)
+        distance = np.linalg.norm(positions[charged] - predicted, axis=1)
+        chosen = charged[np.argsort(distance, kind="stable")]
+        expected_woken = np.zeros_like(awake)
+        expected_woken[chosen if count is None else chosen[:count]] = True
+        _, reward, _, _, info = env.step(action)
+        np.testing.assert_array_equal(info["woken"], expected_woken)
+        energy = 0.02 * expected_woken.sum() + 0.05 * (expected_woken & ~awake).sum()
+        battery = np.maximum(battery - 0.02 * expected_woken - 0.05 * (expected_woken & ~awake), 0)
+        awake = expected_woken
+        assert info["energy"] == pytest.approx(energy, rel=1e-12)
+        np.testing.assert_allclose(info["battery"], battery, rtol=0, atol=1e-12)
+        expected_reward = -min(info["error"], 200.0) / 50.0 - 2.0 * energy
+        assert reward == pytest.approx(expected_reward, rel=1e-12)
+    # waking all five times at 0.07 and 0.02 a step emptied no one, but the budget shows
+    assert battery.min() < 1.0 - 5 * 0.02
+
+
+def test_an_empty_sensor_cannot_be_woken():
+    env = gym.make(ENV_ID, wake_energy=0.6, startup_energy=0.0).unwrapped
+    env.reset(seed=0)
+    _, _, _, _, first = env.step(NEAREST[3])
+    _, _, _, _, second = env.step(NEAREST[3])
+    # after one step at 0.6 a sensor has 0.4 left: the three first ones are skipped
+    assert not np.any(first["woken"] & second["woken"])
+    assert second["woken"].sum() == 3
+
+
+def test_a_lost_track_is_reacquired_by_waking_every_sensor():
+    """Nothing is woken for 25 steps, so the tracker extrapolates blind and loses the
+    target; then the search action wakes every charged sensor, only the sensors that sense
+    the target report (clutter at detecting sensors), and the track is back within 5 steps.
+    Waking the 16 nearest the lost prediction instead (what v0 allowed) does not get it
+    back."""
+
+    def run(recovery_action):
+        env = gym.make(ENV_ID, scenario="S1", clutter_rate=1.0).unwrapped
+        env.reset(seed=2)
+        errors = [env.step(NEAREST[8])[4]["error"] for _ in range(10)]
+        errors += [env.step(NEAREST[0])[4]["error"] for _ in range(25)]
+        lost = errors[-1]
+        errors += [env.step(recovery_action)[4]["error"] for _ in range(5)]
+        return lost, errors[-1]
+
+    lost, recovered = run(ALL)
+    assert lost > 100.0  # two sensing ranges off: no sensor near the prediction senses it
+    assert recovered < 5.0  # measured 0.8 m (1.5 m at the first search step)
+    _, not_recovered = run(NEAREST[16])
+    assert not_recovered > 150.0  # measured 212 m and growing
+
+
+@pytest.mark.parametrize("action", [-1, len(WAKE_COUNTS), 1.5, "2", np.array([1, 2])])
+def test_bad_actions_are_refused(action):
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action must be an integer"):
+        env.step(action)
