@@ -11,6 +11,12 @@
 
     python scripts/sensors_baselines.py                      # S1, clutter 5, 100 seeds
     python scripts/sensors_baselines.py --seeds 20 --training-seeds 10
+    python scripts/sensors_baselines.py --models models/sensors-v1-ppo-seed*   # with agents
+
+``--models``: folders written by ``scripts/train_rl.py`` (model.zip, config.json,
+vecnormalize.pkl); each agent is evaluated without training, and the agents together are
+one more row: the IQM over all their episodes (seeds x agents) with a bootstrap stratified
+by agent, as rliable does for several training runs.
 
 One environment configuration is one task, so rliable's stratified bootstrap reduces to a
 plain bootstrap over episodes: ``scipy.stats.bootstrap`` of the 25 %-trimmed mean gives the
@@ -20,6 +26,7 @@ same interval without another dependency.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -34,18 +41,27 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
-from agents.rl.evaluation import ConstantPolicy, RandomPolicy, run_policy_episode  # noqa: E402
+from agents.rl.evaluation import (  # noqa: E402
+    ConstantPolicy,
+    ModelPolicy,
+    RandomPolicy,
+    run_policy_episode,
+)
 from agents.rl.heuristics import (  # noqa: E402
     HEURISTIC_GRIDS,
     SilenceSearchPolicy,
     UncertaintyRadiusPolicy,
 )
+from agents.rl.training import load_agent  # noqa: E402
 
 ENV_ID = "DGPTrackSensors-v1"
 RULES = {"uncertainty radius": UncertaintyRadiusPolicy, "silence search": SilenceSearchPolicy}
 
 
 def make_policy(kind: str, setting, env: gym.Env, seed: int):
+    if kind == "agent":
+        model, config = load_agent(setting)
+        return ModelPolicy(model, config["normalizer"])
     if kind == "constant":
         return ConstantPolicy(setting)
     if kind == "random":
@@ -58,8 +74,9 @@ def run_block(task):
     kind, setting, env_kwargs, seeds = task
     env = gym.make(ENV_ID, **env_kwargs)
     rows = []
+    agent = make_policy(kind, setting, env, seeds[0]) if kind == "agent" else None
     for seed in seeds:
-        policy = make_policy(kind, setting, env, seed)
+        policy = agent or make_policy(kind, setting, env, seed)
         rows.append(run_policy_episode(env, policy, seed))
     return rows
 
@@ -90,6 +107,29 @@ def paired_interval(differences: np.ndarray) -> tuple[float, float]:
     return float(differences.mean()), float(sem * stats.t.ppf(0.975, differences.size - 1))
 
 
+def _pooled(by_name: dict, agents: list[str], reference: np.ndarray) -> str:
+    """The table cells of several trained agents together: the IQM over every (agent, seed)
+    episode with a percentile bootstrap stratified by agent (2000 resamples), the mean, and
+    the paired difference of the agents' mean return per seed to ``reference``."""
+    returns = np.array([[row["return"] for row in by_name[name]] for name in agents])
+    rng = np.random.default_rng(0)
+    resampled = [
+        stats.trim_mean(
+            np.concatenate([row[rng.integers(0, row.size, row.size)] for row in returns]), 0.25
+        )
+        for _ in range(2000)
+    ]
+    low, high = np.percentile(resampled, [2.5, 97.5])
+    iqm = float(stats.trim_mean(returns.ravel(), 0.25))
+    difference, half = paired_interval(returns.mean(axis=0) - reference)
+    nrmse = 100 * np.mean([[row["nrmse"] for row in by_name[name]] for name in agents])
+    per_step = np.mean([[row["per_step"] for row in by_name[name]] for name in agents])
+    return (
+        f"{iqm:.1f} [{low:.1f}, {high:.1f}] | {returns.mean():.1f} | {nrmse:.2f} | "
+        f"{per_step:.1f} | {difference:+.1f} +- {half:.1f}"
+    )
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
@@ -98,6 +138,9 @@ def main(argv=None) -> int:
     parser.add_argument("--clutter-rate", type=float, default=5.0)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=ROOT / "docs")
+    parser.add_argument(
+        "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
+    )
     args = parser.parse_args(argv)
     env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
     env = gym.make(ENV_ID, **env_kwargs)
@@ -113,21 +156,26 @@ def main(argv=None) -> int:
         print(f"training  {kind:20s} {setting}: mean return {score:.2f}")
         if kind not in best or score > best[kind][1]:
             best[kind] = (setting, score)
+    training_score = {}
 
     # 2. every policy on the evaluation seeds
     evaluation = list(range(args.seeds))
     policies = {name: ("constant", action) for name, action in constants.items()}
     policies["random"] = ("random", None)
-    for kind, (setting, _) in best.items():
+    for kind, (setting, score) in best.items():
         label = ", ".join(f"{key}={value}" for key, value in setting.items())
         policies[f"{kind} ({label})"] = (kind, setting)
+        training_score[f"{kind} ({label})"] = score
+    for folder in args.models:
+        config = json.loads((folder / "config.json").read_text())
+        if config["env"] != ENV_ID or config["env_kwargs"] != env_kwargs:
+            parser.error(f"{folder} was trained on {config['env']} {config['env_kwargs']}")
+        policies[f"agent {folder.name}"] = ("agent", folder)
     names = list(policies)
     results = run_all([(*policies[name], env_kwargs, evaluation) for name in names], args.workers)
     by_name = dict(zip(names, results))
-    best_rule = max(
-        (name for name in names if policies[name][0] in RULES),
-        key=lambda name: np.mean([row["return"] for row in by_name[name]]),
-    )
+    agents = [name for name in names if policies[name][0] == "agent"]
+    best_rule = max(training_score, key=training_score.get)  # chosen on training seeds
 
     # 3. the table and the figure
     lines = [
@@ -136,17 +184,23 @@ def main(argv=None) -> int:
         "Generated by `python scripts/sensors_baselines.py"
         + (f" --seeds {args.seeds}" if args.seeds != 100 else "")
         + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
+        + (" --models " + " ".join(str(path) for path in args.models) if args.models else "")
         + "`. The rules were tuned on training seeds "
         f"1000-{999 + args.training_seeds}; every row is on the evaluation seeds 0-{args.seeds - 1} "
         "(random paths in layouts no training episode used). IQM: interquartile mean of the "
         "episode returns with a 95 % bootstrap interval; paired: the mean per-seed return "
-        f"difference to **{best_rule}** (the best rule) with a 95 % t interval.",
+        f"difference to **{best_rule}** (the rule with the best mean return on the training "
+        "seeds) with a 95 % t interval.",
         "",
         "| policy | IQM return [95 % CI] | mean return | NRMSE % | sensors per step | paired - best rule |",
         "|---|---|---|---|---|---|",
     ]
     reference = np.array([row["return"] for row in by_name[best_rule]])
     points = []
+    if agents:
+        lines.append(
+            f"| **{len(agents)} agents together** | {_pooled(by_name, agents, reference)} |"
+        )
     for name in names:
         rows = by_name[name]
         returns = np.array([row["return"] for row in rows])
@@ -174,17 +228,12 @@ def main(argv=None) -> int:
     figure, axis = plt.subplots(figsize=(6.5, 4.2))
     for name, per_step, error in points:
         kind = policies[name][0]
-        marker = {"constant": "o", "random": "x"}.get(kind, "*")
+        marker = {"constant": "o", "random": "x", "agent": "D"}.get(kind, "*")
         axis.scatter(per_step, error, marker=marker, s=60 if marker == "*" else 25)
-        if kind != "constant" or name in (
-            "nearest 1",
-            "nearest 4",
-            "nearest 8",
-            "nearest 16",
-            "all",
-        ):
+        labelled = ("nearest 1", "nearest 4", "nearest 8", "nearest 16", "all")
+        if kind != "constant" or name in labelled:
             axis.annotate(
-                name.split(" (")[0],
+                "PPO" if kind == "agent" else name.split(" (")[0],
                 (per_step, error),
                 fontsize=7,
                 xytext=(4, 2),

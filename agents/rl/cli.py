@@ -61,7 +61,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--algo",
         default="ppo",
         choices=["ppo", "a2c", "dqn"],
-        help="algorithm (default: ppo; dqn needs a discrete action space: window only)",
+        help="algorithm (default: ppo; dqn needs a discrete action space: window, sensors-v1)",
     )
     parser.add_argument(
         "--timesteps", type=int, default=20_000, help="training steps (default: 20000)"

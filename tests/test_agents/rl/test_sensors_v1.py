@@ -117,3 +117,26 @@ def test_bad_actions_are_refused(action):
     env.reset(seed=0)
     with pytest.raises(ValueError, match="action must be an integer"):
         env.step(action)
+
+
+def test_the_committed_agents_load_and_act(tmp_path):
+    """models/ holds the trained agents the docs quote; they load with their frozen
+    normaliser and act on raw observations of the environment they were trained on."""
+    from pathlib import Path
+
+    from agents.rl.evaluation import ModelPolicy
+    from agents.rl.training import load_agent
+
+    folders = sorted((Path(__file__).parents[3] / "models").glob("sensors-v1-ppo-seed*"))
+    assert len(folders) == 5
+    for folder in folders:
+        assert sum(f.stat().st_size for f in folder.iterdir()) <= 1_000_000
+    model, config = load_agent(folders[0])
+    assert config["env"] == ENV_ID and config["normalizer"] is not None
+    policy = ModelPolicy(model, config["normalizer"])
+    env = gym.make(ENV_ID, **config["env_kwargs"])
+    observation, _ = env.reset(seed=0)
+    for _ in range(5):
+        action = policy.predict(observation)
+        assert env.action_space.contains(int(action))
+        observation, *_ = env.step(action)
