@@ -133,8 +133,14 @@ def test_evaluate_runs_a_user_tracker_named_by_its_class(tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
     args = ("--out", str(tmp_path / "out"), "--scenarios", "S1", "--clutter-rates", "1")
     result = run_script(
-        "evaluate.py", "--trackers", "my_trackers:MyTracker", *args, "--runs", "2",
-        "--no-progress", env=env,
+        "evaluate.py",
+        "--trackers",
+        "my_trackers:MyTracker",
+        *args,
+        "--runs",
+        "2",
+        "--no-progress",
+        env=env,
     )
     assert result.returncode == 0, result.stderr
     assert re.search(r"^\| my_trackers:MyTracker \| S1 \| 1 \| 1 \| [\d.]+ ± ", result.stdout, re.M)
@@ -155,3 +161,39 @@ def test_evaluate_explains_a_bad_output_folder(tmp_path):
     result = run_script("evaluate.py", "--out", str(corrupt), *args)
     assert result.returncode == 2 and "not a usable dgpt-gym results database" in result.stderr
     assert "results.sqlite" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
+    """The scripts behind docs/rl_sensors_v1.md and the agents' action table, on 2 seeds
+    (the documented runs use 100 and 20): the table has every policy and the pooled agents,
+    the figure is written, and the agents' actions are tabulated by situation."""
+    model = str(ROOT / "models" / "sensors-v1-ppo-seed0")
+    result = run_script(
+        "sensors_baselines.py",
+        "--seeds",
+        "2",
+        "--training-seeds",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+        "--models",
+        model,
+    )
+    assert result.returncode == 0, result.stderr
+    table = (tmp_path / "rl_sensors_v1.md").read_text()
+    for row in (
+        "| nearest 0 |",
+        "| all |",
+        "| random |",
+        "| uncertainty radius",
+        "| silence search",
+        "| **1 agents together** |",
+        "| agent sensors-v1-ppo-seed0 |",
+    ):
+        assert row in table
+    assert (tmp_path / "figures" / "rl_sensors_v1_pareto.png").stat().st_size > 10_000
+    result = run_script("sensors_agent_actions.py", model, "--seeds", "1")
+    assert result.returncode == 0, result.stderr
+    assert "| after a silent step |" in result.stdout and "| sigma < 10 m |" in result.stdout
