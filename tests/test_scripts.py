@@ -194,6 +194,9 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
     ):
         assert row in table
     assert (tmp_path / "figures" / "rl_sensors_v1_pareto.png").stat().st_size > 10_000
-    result = run_script("sensors_agent_actions.py", model, "--seeds", "1")
+    result = run_script("agent_actions.py", model, "--seeds", "1")
     assert result.returncode == 0, result.stderr
     assert "| after a silent step |" in result.stdout and "| sigma < 10 m |" in result.stdout
+    result = run_script("agent_actions.py", str(ROOT / "models" / "window-ppo"), "--seeds", "1")
+    assert result.returncode == 0, result.stderr
+    assert "mean window" in result.stdout and "| 3+ experts |" in result.stdout

@@ -1,0 +1,114 @@
+"""What trained agents choose, by situation, on held-out seeds.
+
+Each agent folder (``scripts/train_rl.py`` output) is loaded with its frozen normaliser and
+run on the evaluation seeds of the environment it was trained on; what it set each step
+(the environment's knob: window C, gate threshold or sensors woken) is tabulated by what the
+observation says:
+
+- ``DGPTrackSensors-v1``: the prediction's larger standard deviation (below 10 m, 10-30 m,
+  above 30 m) while sensors report, and the steps after a step without any report;
+- ``DGPTrackWindow-v0`` / ``DGPTrackGating-v0``: after a step without measurements; a
+  surprise (the gated summaries lie more than 10 m, a fifth of the sensing range, from
+  their predictions on average); otherwise 1-2 experts or 3 and more.
+
+    python scripts/agent_actions.py models/sensors-v1-ppo-seed*
+    python scripts/agent_actions.py models/window-ppo
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+
+import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.evaluation import ModelPolicy  # noqa: E402
+from agents.rl.features import FEATURE_NAMES  # noqa: E402
+from agents.rl.sensors_v1 import OBSERVED_CANDIDATES  # noqa: E402
+from agents.rl.training import load_agent  # noqa: E402
+
+SENSOR_SITUATIONS = ("sigma < 10 m", "sigma 10-30 m", "sigma > 30 m", "after a silent step")
+TUNING_SITUATIONS = (
+    "1-2 experts",
+    "3+ experts",
+    "surprise (innovation > 10 m)",
+    "after a silent step",
+)
+FEATURE = {name: index for index, name in enumerate(FEATURE_NAMES)}
+
+
+def sensor_situation(observation: np.ndarray) -> str:
+    tail = observation[3 * OBSERVED_CANDIDATES :]
+    if round(float(tail[5]) * 10) >= 1:
+        return SENSOR_SITUATIONS[3]
+    sigma = float(np.max(np.expm1(6.0 * tail[0:2])))
+    return (
+        SENSOR_SITUATIONS[0]
+        if sigma < 10
+        else SENSOR_SITUATIONS[1]
+        if sigma < 30
+        else SENSOR_SITUATIONS[2]
+    )
+
+
+def tuning_situation(observation: np.ndarray) -> str:
+    if observation[FEATURE["silent_steps"]] >= 0.1 - 1e-6:
+        return TUNING_SITUATIONS[3]
+    if observation[FEATURE["innovation"]] > 0.2:
+        return TUNING_SITUATIONS[2]
+    experts = round(float(observation[FEATURE["n_experts"]]) * 10)
+    return TUNING_SITUATIONS[0] if experts <= 2 else TUNING_SITUATIONS[1]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="+", type=Path)
+    parser.add_argument("--seeds", type=int, default=20, help="evaluation seeds 0..N-1")
+    args = parser.parse_args(argv)
+    counts = collections.defaultdict(collections.Counter)
+    env_ids = set()
+    for folder in args.models:
+        model, config = load_agent(folder)
+        env_ids.add(config["env"])
+        policy = ModelPolicy(model, config["normalizer"])
+        env = gym.make(config["env"], **config["env_kwargs"])
+        situations = (
+            SENSOR_SITUATIONS if config["env"] == "DGPTrackSensors-v1" else TUNING_SITUATIONS
+        )
+        classify = sensor_situation if situations is SENSOR_SITUATIONS else tuning_situation
+        for seed in range(args.seeds):
+            observation, _ = env.reset(seed=seed)
+            done = False
+            while not done:
+                name = classify(observation)
+                observation, _, terminated, truncated, info = env.step(policy.predict(observation))
+                counts[name][round(float(info[env.unwrapped.knob]), 1)] += 1
+                done = terminated or truncated
+    if len(env_ids) != 1:
+        parser.error(f"the agents must share one environment; got {sorted(env_ids)}")
+    knob = gym.make(env_ids.pop()).unwrapped.knob
+    print(f"{len(args.models)} agent(s), seeds 0-{args.seeds - 1}: {knob} per step, by situation\n")
+    print(f"| situation | steps | mean {knob} | most frequent values (share) |")
+    print("|---|---|---|---|")
+    for name in situations:
+        total = sum(counts[name].values())
+        if not total:
+            continue
+        mean = sum(value * n for value, n in counts[name].items()) / total
+        shares = ", ".join(
+            f"{value:g}: {100 * n / total:.0f} %" for value, n in counts[name].most_common(4)
+        )
+        print(f"| {name} | {total} | {mean:.2f} | {shares} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
