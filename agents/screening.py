@@ -94,8 +94,10 @@ def sensing_probability(
     Returns ``(reporting sensors (k,) ascending, probability (k,))``. LR is evaluated with
     N(z_j; mu, P + sigma^2 I) in place of N(z_j; x, sigma^2 I), exact for scans with one
     point near the prediction; the prior is the probability that x ~ N(mu, P) (isotropic
-    with P's mean variance) lies in the sensor's disc.
+    with P's mean variance) lies in the sensor's disc. No measurements: two empty arrays.
     """
+    if not sensors.size:
+        return sensors[:0], np.empty(0)
     order = np.argsort(sensors, kind="stable")
     points, sensors = points[order], sensors[order]
     starts = group_starts(sensors)
@@ -144,13 +146,11 @@ def initiation_scores(
         return np.empty(0), np.empty(0, dtype=int)
     pair_var = 2.0 * noise_var
     reach = 3.0 * np.sqrt(pair_var)
-    sensor_tree = spatial.cKDTree(sensor_positions)
     inner = max(sensing_range - reach, 0.0)
-    covering = sensor_tree.query_ball_point(points, inner)  # witnesses and own sensor
-    witness_point = np.repeat(np.arange(n), [len(row) for row in covering])
-    witness_sensor = np.fromiter(
-        (s for row in covering for s in row), dtype=np.int64, count=witness_point.size
+    covering = spatial.cKDTree(points).sparse_distance_matrix(  # witnesses and own sensor
+        spatial.cKDTree(sensor_positions), inner, output_type="ndarray"
     )
+    witness_point, witness_sensor = covering["i"].astype(np.int64), covering["j"].astype(np.int64)
     keep = witness_sensor != sensors[witness_point]
     if awake is not None:
         keep &= np.asarray(awake, dtype=bool)[witness_sensor]

@@ -9,6 +9,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import problem_spec
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate, stats
@@ -108,8 +109,10 @@ def test_sensing_probability_is_prior_times_likelihood_ratio():
 def test_initiation_scores_need_every_covering_sensor_to_agree():
     """Sensors 0-2 cover the target at (0, 0); 0 and 1 report it, so the target points
     score with one or two witnesses; a clutter point that sensor 2 also covers scores
-    -inf, and one covered by its own sensor alone has no witness."""
-    positions = np.array([[10.0, 0.0], [-10.0, 5.0], [0.0, -12.0], [400.0, 400.0]])
+    -inf, and one covered by its own sensor alone has no witness. Sensor 4 senses the
+    target near the edge of its disc (48 m), where a noisy target point may fall outside
+    it: no witness of the target points, although it reports nothing."""
+    positions = np.array([[10.0, 0.0], [-10.0, 5.0], [0.0, -12.0], [400.0, 400.0], [0.0, 48.0]])
     points = np.array(
         [
             [0.3, -0.2],  # sensor 0, target
@@ -121,7 +124,7 @@ def test_initiation_scores_need_every_covering_sensor_to_agree():
     )
     sensors = np.array([0, 1, 2, 1, 3])
     scores, witnesses = initiation_scores(points, sensors, positions, 50.0, 1.0, 1.0, 1e-4)
-    assert list(witnesses) == [2, 2, 2, 2, 0]
+    assert list(witnesses) == [2, 2, 2, 3, 0]
     assert np.all(scores[:3] > 0)
     assert scores[3] == -np.inf and scores[4] == 0.0
     # each target point's score is the sum of its witnesses' log likelihood ratios
@@ -137,12 +140,103 @@ def test_initiation_scores_need_every_covering_sensor_to_agree():
         )
         assert scores[i] == pytest.approx(expected, rel=1e-9)
     # a sleeping sensor (the RL sensor task) is no witness: its silence says nothing
-    awake = np.array([True, True, False, True])
+    awake = np.array([True, True, False, True, True])
     scores, witnesses = initiation_scores(
         points, sensors, positions, 50.0, 1.0, 1.0, 1e-4, awake=awake
     )
-    assert list(witnesses) == [1, 1, 2, 1, 0]
+    assert list(witnesses) == [1, 1, 2, 2, 0]
     assert scores[3] == -np.inf and np.all(scores[:3] > 0)
+
+
+def test_no_measurements_no_sensing_sensor():
+    reporting, probability = sensing_probability(
+        np.empty((0, 2)),
+        np.empty(0, dtype=int),
+        np.zeros((1, 2)),
+        50.0,
+        np.zeros(2),
+        np.ones(2),
+        np.ones(2),
+        1.0,
+        1e-4,
+    )
+    assert reporting.size == 0 and probability.size == 0
+
+
+# A hand-made scene for DGPT's track start: sensors 0 and 1 cover the target at (500, 500),
+# sensors 2 and 3 a place 100 m east (and no other sensor covers either); 100 far sensors
+# each report one clutter point.
+FAR = np.column_stack([np.linspace(100.0, 900.0, 100), np.full(100, 150.0)])
+SCENE = np.vstack([[[485.0, 500.0], [515.0, 505.0], [585.0, 500.0], [615.0, 505.0]], FAR])
+
+
+def scene_observation(step, target_points, target_sensors=(0, 1)):
+    """``target_sensors`` report ``target_points``; each far sensor a point 20 m from it."""
+    points = np.vstack([np.reshape(target_points, (-1, 2)), FAR + [0.0, 20.0]])
+    own = np.asarray(target_sensors, dtype=int)[: len(np.reshape(target_points, (-1, 2)))]
+    sensors = np.concatenate([own, np.arange(4, 4 + len(FAR))])
+    return {"measurements": points, "sensor": sensors, "mask": np.ones(sensors.size), "t": step}
+
+
+def all_clutter_tracker():
+    tracker = DGPT(window=3)
+    tracker.reset(problem_spec(SCENE, clutter_sensors="all", n_steps=60))
+    return tracker
+
+
+PAIR = np.array([[500.0, 500.0], [500.5, 500.0]])
+
+
+def test_a_track_starts_on_consistent_evidence_beating_the_prior_odds():
+    """Two steps with the target points of sensors 0 and 1 0.5 m apart: each step's best
+    candidate scores log(0.58 x 625 e^(-1/16)) = 5.84 (one witness), 11.7 over the two
+    steps, above the prior odds log(102) + log(102) = 9.25 of 102 measurements a step: the
+    track starts at the second step, from the two target points only."""
+    tracker = all_clutter_tracker()
+    tracker.update(scene_observation(0, PAIR))
+    assert tracker.searching_
+    tracker.update(scene_observation(1, PAIR + [1.0, 0.0]))
+    assert not tracker.searching_
+    np.testing.assert_array_equal(tracker.window_.records[-1].sensors, [0, 1])
+
+
+def test_no_track_starts_on_weak_evidence():
+    """The same two steps with the points 2.6 m apart: 4.2 a step, 8.4 < 9.25."""
+    tracker = all_clutter_tracker()
+    loose = np.array([[500.0, 500.0], [502.6, 500.0]])
+    tracker.update(scene_observation(0, loose))
+    tracker.update(scene_observation(1, loose))
+    assert tracker.searching_
+
+
+def test_no_track_starts_from_candidates_farther_apart_than_a_target_moves():
+    """Strong pairs at two steps, but the second 100 m from the first (sensors 2 and 3):
+    farther than 50 m/s allows, so they do not confirm each other."""
+    tracker = all_clutter_tracker()
+    tracker.update(scene_observation(0, PAIR))
+    tracker.update(scene_observation(1, PAIR + [100.0, 0.0], target_sensors=(2, 3)))
+    assert tracker.searching_
+    tracker.update(scene_observation(2, PAIR + [100.0, 0.0], target_sensors=(2, 3)))
+    assert not tracker.searching_  # the third step confirms the second
+
+
+def test_a_track_is_dropped_when_its_prediction_no_longer_says_who_senses_it():
+    """After the start, only the far clutter reports: no sensor is admitted, the prediction
+    extrapolates and its variance grows; the track is searched for again at the first step
+    whose prediction has a standard deviation above the sensing range, not before."""
+    tracker = all_clutter_tracker()
+    for step in range(4):
+        tracker.update(scene_observation(step, PAIR + [2.0 * step, 0.0]))
+    assert not tracker.searching_
+    silent = np.empty((0, 2))
+    for step in range(4, 60):
+        std = np.sqrt(np.max(tracker.prior_next_[1]))
+        observation = scene_observation(step, silent)
+        tracker.update(observation)
+        assert tracker.searching_ == (std > 50.0), (step, std)
+        if tracker.searching_:
+            break
+    assert tracker.searching_
 
 
 def run_all_clutter_episode(seed: int, clutter_rate: float = 1.0):
