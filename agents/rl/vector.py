@@ -34,7 +34,18 @@ __all__ = [
     "sensors_v1_vector_env",
     "stable_baselines_vec_env",
     "EpisodeStepLimit",
+    "step_in_lockstep",
 ]
+
+
+def step_in_lockstep(envs, actions) -> list[tuple]:
+    """One step of the RL environments ``envs`` (``TrackerInsideEnv``, unwrapped) with
+    ``actions``: every ``begin_step``, one ``update_batch`` of their trackers, every
+    ``end_step``; returns their ``(observation, reward, terminated, truncated, info)``."""
+    inputs = [env.begin_step(action) for env, action in zip(envs, actions)]
+    trackers = [env.tracker for env in envs]
+    estimates = type(trackers[0]).update_batch(trackers, inputs)
+    return [env.end_step(estimate) for env, estimate in zip(envs, estimates)]
 
 
 class TrackerInsideVectorEnv(SyncVectorEnv):
@@ -59,7 +70,7 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
         actions = list(iterate(self.action_space, actions))
         infos: dict = {}
         env_infos: list = [None] * self.num_envs
-        stepping, tracker_observations = [], []
+        stepping = []
         for i, env in enumerate(self.envs):
             if self._autoreset_envs[i]:
                 self.time_limit.restart([i])
@@ -68,19 +79,19 @@ class TrackerInsideVectorEnv(SyncVectorEnv):
                 self._terminations[i] = False
                 self._truncations[i] = False
             else:
-                tracker_observations.append(env.unwrapped.begin_step(actions[i]))
                 stepping.append(i)
         if stepping:
-            trackers = [self.envs[i].unwrapped.tracker for i in stepping]
-            estimates = type(trackers[0]).update_batch(trackers, tracker_observations)
-            for i, estimate in zip(stepping, estimates):
+            results = step_in_lockstep(
+                [self.envs[i].unwrapped for i in stepping], [actions[i] for i in stepping]
+            )
+            for i, result in zip(stepping, results):
                 (
                     self._env_obs[i],
                     self._rewards[i],
                     self._terminations[i],
                     self._truncations[i],
                     env_infos[i],
-                ) = self.envs[i].unwrapped.end_step(estimate)
+                ) = result
                 self._truncations[i] |= self.time_limit.count(i)
         for i, env_info in enumerate(env_infos):
             infos = self._add_info(infos, env_info, i)
@@ -152,12 +163,9 @@ def stable_baselines_vec_env(env_id: str, n_envs: int, seed: int, env_kwargs: di
             return super().reset()
 
         def step_wait(self):
-            envs = [env.unwrapped for env in self.envs]
-            inputs = [env.begin_step(action) for env, action in zip(envs, self.actions)]
-            trackers = [env.tracker for env in envs]
-            estimates = type(trackers[0]).update_batch(trackers, inputs)
-            for index, (env, estimate) in enumerate(zip(envs, estimates)):
-                observation, reward, terminated, truncated, info = env.end_step(estimate)
+            results = step_in_lockstep([env.unwrapped for env in self.envs], self.actions)
+            for index, result in enumerate(results):
+                observation, reward, terminated, truncated, info = result
                 truncated = truncated or self.time_limit.count(index)
                 self.buf_rews[index] = reward
                 self.buf_infos[index] = info
