@@ -9,7 +9,7 @@ from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, WAKE_COUNTS
 
 __all__ = ["UncertaintyRadiusPolicy", "SilenceSearchPolicy", "level_for", "HEURISTIC_GRIDS"]
 
-_COUNTS = np.array([len(WAKE_COUNTS) * 1000 if c is None else c for c in WAKE_COUNTS])
+_COUNTS = np.array([np.inf if count is None else count for count in WAKE_COUNTS])
 
 
 def level_for(count: int) -> int:

@@ -171,7 +171,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
             )
         action = int(value.reshape(-1)[0])
         count = WAKE_COUNTS[action]
-        order = self._wake_order()
+        order = self._order  # the wake order the observation described
         woken = np.zeros(self.inner.n_sensors, dtype=bool)
         woken[order if count is None else order[:count]] = True
         energy = woken * self.wake_energy + (woken & ~self._awake) * self.startup_energy
@@ -221,7 +221,8 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         return charged[np.argsort(distance, kind="stable")]
 
     def _observation(self) -> np.ndarray:
-        order = self._wake_order()
+        """The observation of the coming step; keeps its wake order for ``begin_step``."""
+        self._order = order = self._wake_order()
         nearest = order[:OBSERVED_CANDIDATES]
         per_candidate = np.zeros((OBSERVED_CANDIDATES, 3))
         per_candidate[:, 0] = 10.0  # no such sensor: far away, empty, asleep

@@ -140,3 +140,47 @@ def test_the_committed_agents_load_and_act(tmp_path):
         action = policy.predict(observation)
         assert env.action_space.contains(int(action))
         observation, *_ = env.step(action)
+
+
+def test_the_observation_describes_the_prediction_and_the_sensors():
+    """Every field of the observation recomputed from the tracker's prediction, the
+    sensor layout and what ``info`` reports."""
+    env = gym.make(ENV_ID, scenario="S4").unwrapped
+    env.reset(seed=6)
+    positions, silent = env.inner.network.positions, 0
+    for step, action in enumerate([NEAREST[8]] * 12 + [NEAREST[0]] * 3 + [NEAREST[4]] * 3):
+        observation, _, _, _, info = env.step(action)
+        mean, var = env.tracker.prior_next_
+        n_reports = int(info["reports"]["mask"].sum())
+        silent = 0 if n_reports else silent + 1
+        std = np.sqrt(var)
+        cost = 0.01 + np.where(info["woken"], 0.0, 0.01)
+        charged = np.flatnonzero(info["battery"] >= cost - 1e-12)
+        distance = np.sort(np.linalg.norm(positions[charged] - mean, axis=1))
+        expected = np.r_[
+            np.column_stack([distance[:16] / 50.0, np.zeros(16), np.zeros(16)]).ravel(),
+            np.log1p(std) / 6.0,
+            (mean - info["estimate"]) / 25.0,
+            1.0 - (step + 1) / env.inner.n_steps,
+            min(silent / 10.0, 1.0),
+            np.log1p(n_reports) / 6.0,
+            info["battery"].mean(),
+            np.sum(distance <= 50.0 + 2.0 * std.max()) / 64.0,
+        ]
+        nearest = charged[np.argsort(np.linalg.norm(positions[charged] - mean, axis=1))][:16]
+        expected[1:48:3] = info["battery"][nearest]
+        expected[2:48:3] = info["woken"][nearest]
+        np.testing.assert_allclose(observation, np.clip(expected, -10, 10), rtol=1e-6, atol=1e-6)
+
+
+def test_the_error_term_is_capped():
+    """Nothing woken: the tracker never learns where the target is. Each step's reward is
+    -error / 50 m up to an error of 200 m and -4 beyond (no energy is spent)."""
+    env = gym.make(ENV_ID, scenario="S2").unwrapped
+    env.reset(seed=1)
+    capped = 0
+    for _ in range(60):
+        _, reward, _, _, info = env.step(NEAREST[0])
+        assert reward == pytest.approx(-min(info["error"], 200.0) / 50.0, rel=1e-12)
+        capped += info["error"] > 200.0
+    assert 0 < capped < 60  # both sides of the cap were met
