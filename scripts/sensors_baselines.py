@@ -19,8 +19,8 @@ one more row: the IQM over all their episodes (seeds x agents) with a bootstrap 
 by agent, as rliable does for several training runs.
 
 One environment configuration is one task, so rliable's stratified bootstrap reduces to a
-plain bootstrap over episodes: ``scipy.stats.bootstrap`` of the 25 %-trimmed mean gives the
-same interval without another dependency.
+bootstrap over episodes (stratified by agent when several are pooled): ``scipy.stats.bootstrap``
+of the 25 %-trimmed mean gives the same interval without another dependency.
 """
 
 from __future__ import annotations
@@ -88,17 +88,23 @@ def run_all(tasks, workers):
         return list(pool.map(run_block, tasks))
 
 
-def iqm_interval(values: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
-    """Interquartile mean and its 95 % percentile-bootstrap interval (2000 resamples)."""
-    iqm = float(stats.trim_mean(values, 0.25))
+def iqm_interval(*samples: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
+    """Interquartile mean of the pooled ``samples`` and its 95 % percentile-bootstrap
+    interval (2000 resamples). With several samples (the episodes of several agents) each
+    is resampled on its own, the bootstrap stratified by sample that rliable uses."""
+
+    def pooled_iqm(*resampled, axis=-1):
+        return stats.trim_mean(np.concatenate(resampled, axis=axis), 0.25, axis=axis)
+
     result = stats.bootstrap(
-        (values,),
-        lambda x, axis: stats.trim_mean(x, 0.25, axis=axis),
+        samples,
+        pooled_iqm,
         n_resamples=2000,
         method="percentile",
         rng=np.random.default_rng(seed),
     )
-    return iqm, float(result.confidence_interval.low), float(result.confidence_interval.high)
+    interval = result.confidence_interval
+    return float(pooled_iqm(*samples)), float(interval.low), float(interval.high)
 
 
 def paired_interval(differences: np.ndarray) -> tuple[float, float]:
@@ -109,18 +115,10 @@ def paired_interval(differences: np.ndarray) -> tuple[float, float]:
 
 def _pooled(by_name: dict, agents: list[str], reference: np.ndarray) -> str:
     """The table cells of several trained agents together: the IQM over every (agent, seed)
-    episode with a percentile bootstrap stratified by agent (2000 resamples), the mean, and
+    episode with its bootstrap stratified by agent (:func:`iqm_interval`), the mean, and
     the paired difference of the agents' mean return per seed to ``reference``."""
     returns = np.array([[row["return"] for row in by_name[name]] for name in agents])
-    rng = np.random.default_rng(0)
-    resampled = [
-        stats.trim_mean(
-            np.concatenate([row[rng.integers(0, row.size, row.size)] for row in returns]), 0.25
-        )
-        for _ in range(2000)
-    ]
-    low, high = np.percentile(resampled, [2.5, 97.5])
-    iqm = float(stats.trim_mean(returns.ravel(), 0.25))
+    iqm, low, high = iqm_interval(*returns)
     difference, half = paired_interval(returns.mean(axis=0) - reference)
     nrmse = 100 * np.mean([[row["nrmse"] for row in by_name[name]] for name in agents])
     per_step = np.mean([[row["per_step"] for row in by_name[name]] for name in agents])
