@@ -19,11 +19,15 @@ __all__ = ["GatedSummaries", "gate_measurements", "group_starts"]
 @dataclass(frozen=True)
 class GatedSummaries:
     """One weighted-mean summary per reporting sensor: ``sensors`` (k,) ascending,
-    ``summaries`` (k, 2); ``weights`` (n,) of the measurements in sensor-sorted order."""
+    ``summaries`` (k, 2); ``weights`` (n,) of the measurements in sensor-sorted order;
+    ``spread`` (k, 2) the weighted variance sum_j w_j (z_j - z_bar)^2 of each sensor's
+    measurements about its summary, per axis (0 for a single measurement): how far the
+    summary can be from the target when the weights are unsure which measurement is it."""
 
     sensors: np.ndarray
     summaries: np.ndarray
     weights: np.ndarray
+    spread: np.ndarray
 
 
 def group_starts(sorted_keys: np.ndarray) -> np.ndarray:
@@ -63,4 +67,6 @@ def gate_measurements(
     totals = np.add.reduceat(unnormalised, starts)
     weights = unnormalised / np.repeat(totals, counts)
     summaries = np.add.reduceat(weights[:, None] * points, starts, axis=0)
-    return GatedSummaries(sensors[starts], summaries, weights)
+    deviation = points - np.repeat(summaries, counts, axis=0)
+    spread = np.add.reduceat(weights[:, None] * deviation**2, starts, axis=0)
+    return GatedSummaries(sensors[starts], summaries, weights, spread)

@@ -6,6 +6,7 @@ import pytest
 from scipy import stats
 
 from agents.dgpt import DGPT
+from agents.gating import gate_measurements
 from baselines.standard_gp import StandardGP
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.episodes import run_episode
@@ -31,6 +32,22 @@ def test_tracks_s1_without_clutter():
         ]
     )
     assert np.all(nrmse.mean(axis=0) < 0.02), nrmse
+
+
+def test_gated_summary_and_spread_by_hand():
+    """Eqs. (27)-(28) on two sensors: sensor 4's points at residuals 0 and 2 from a
+    prediction of variance 1 per axis (x only) get weights 1 / (1 + e^-2) and e^-2 / (1 + e^-2);
+    the summary is their weighted mean and the spread sum w (z - zbar)^2 = 4 w1 w2; sensor 9's
+    single point is its own summary with no spread."""
+    points = np.array([[10.0, 5.0], [3.0, 1.0], [12.0, 5.0]])
+    sensors = np.array([4, 9, 4])
+    mean = np.array([[10.0, 5.0], [0.0, 0.0], [10.0, 5.0]])
+    gated = gate_measurements(points, sensors, mean, np.ones((3, 2)))
+    w1, w2 = 1.0 / (1.0 + np.exp(-2.0)), np.exp(-2.0) / (1.0 + np.exp(-2.0))
+    np.testing.assert_array_equal(gated.sensors, [4, 9])
+    np.testing.assert_allclose(gated.summaries, [[10.0 + 2.0 * w2, 5.0], [3.0, 1.0]])
+    np.testing.assert_allclose(gated.spread, [[4.0 * w1 * w2, 0.0], [0.0, 0.0]], atol=1e-15)
+    np.testing.assert_allclose(gated.weights, [w1, w2, 1.0])
 
 
 def test_gating_picks_target_measurements_in_clutter():
