@@ -4,8 +4,9 @@
 Every candidate runs on S1-S4, the reference and random paths, clutter rates 1 and 5,
 sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RMSE (m), NRMSE
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
-(nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), and the median
-step time; then a summary per candidate over the cells.
+(nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), the median
+step time, and the share of fitted steps that left a hyperparameter on a bound (%, where
+the tracker reports it); then a summary per candidate over the cells.
 
     python scripts/model_study.py                  # the built-in candidates
     python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
@@ -54,11 +55,21 @@ CANDIDATES = {
         "baselines.standard_gp:StandardGP",
         {"window": 4, "kernel": "ncv", "mean": "prediction"},
     ),
+    **{
+        f"ss-{aggregation}-{window}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": aggregation, "window": window},
+        )
+        for aggregation in ("bcm", "rbcm")
+        for window in (8, 20, 50, 150)
+    },
 }
 """Candidate models: the default (SE kernel around the pooled least-squares trend; also as
 the centralized GP and inside the hybrid filter), the
 paper's zero mean with and without bounds, and the NCV kernel with every expert's state
-integrated out (distributed with BCM / RBCM, and centralized)."""
+integrated out (distributed with BCM / RBCM, and centralized), and the NCV GP in state-space
+form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`,
+BCM / RBCM, q learnt over the last 8, 20, 50 or 150 steps with data)."""
 
 SCENARIOS = ("S1", "S2", "S3", "S4")
 TRAJECTORIES = ("fixed", "random")
@@ -122,7 +133,7 @@ def main(argv=None) -> int:
     def mean(rows, key):
         return float(np.nanmean([row[key] for row in rows]))
 
-    print("candidate        cell                rmse_2d  nrmse%  nees_med_det  cov3_det%  ms")
+    print("candidate        cell                rmse_2d  nrmse%  nees_med_det  cov3_det%  ms  bound%")
     totals = collections.defaultdict(list)
     for (name, scenario, trajectory, clutter), rows in by_cell.items():
         nrmse = 50 * (mean(rows, "nrmse_x") + mean(rows, "nrmse_y"))
@@ -131,14 +142,15 @@ def main(argv=None) -> int:
         )
         nees = float(np.nanmedian([row["nees_median_detected"] for row in rows]))
         rmse = mean(rows, "rmse_2d")
+        at_bound = 100 * mean(rows, "share_at_bound") if "share_at_bound" in rows[0] else np.nan
         cell = f"{scenario} {trajectory:6s} c{clutter:g}"
         print(
             f"{name:16s} {cell:18s} {rmse:8.2f} {nrmse:7.2f} {nees:12.3f} {coverage:9.2f}"
-            f" {float(np.median([row['step_time_ms'] for row in rows])):5.2f}"
+            f" {float(np.median([row['step_time_ms'] for row in rows])):5.2f} {at_bound:6.1f}"
         )
-        totals[name].append((trajectory, rmse, nrmse, nees, coverage))
+        totals[name].append((trajectory, rmse, nrmse, nees, coverage, at_bound))
     print()
-    print("candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%")
+    print("candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%  bound%")
     for name, cells in totals.items():
         fixed, random = (
             np.mean([c[1] for c in cells if c[0] == mode]) if mode in args.trajectories else np.nan
@@ -147,7 +159,7 @@ def main(argv=None) -> int:
         rest = np.mean([c[2:] for c in cells], axis=0)
         print(
             f"{name:16s} {fixed:10.2f} {random:12.2f} {rest[0]:7.2f} {rest[1]:12.3f}"
-            f" {rest[2]:10.2f}"
+            f" {rest[2]:10.2f} {rest[3]:7.1f}"
         )
     return 0
 

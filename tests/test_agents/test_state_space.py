@@ -1,0 +1,255 @@
+"""The NCV GP in state-space form (agents/state_space.py) against dense references: the
+Kalman prediction of the Stone-Soup-checked baselines, the information-form aggregation of
+eqs. (8)-(20) computed with explicit inverses and determinants, the dense Gaussian
+likelihood, and the dense GP with the integrated Wiener-velocity kernel; then the tracker
+built on it (agents/state_space_dgpt.py)."""
+
+import copy
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import multivariate_normal
+
+import dgpt_gym  # noqa: F401  (registers the environment)
+from agents import gp
+from agents.state_space import (
+    WindowStep,
+    expert_posteriors,
+    filter_window,
+    fused_update,
+    ncv_predict,
+    step_log_likelihood,
+)
+from agents.state_space_dgpt import StateSpaceDGPT, newton_step
+from baselines.kalman import constant_velocity_model, kalman_predict
+from tests.conftest import problem_spec
+
+seeds = st.integers(0, 2**32 - 1)
+
+
+def random_state(rng, batch=()):
+    """A random state mean (batch, 2) and positive-definite covariance (batch, 2, 2)."""
+    mean = rng.normal(0.0, 10.0, batch + (2,))
+    root = rng.normal(0.0, 3.0, batch + (2, 2))
+    cov = root @ np.swapaxes(root, -1, -2) + 0.5 * np.eye(2)
+    return mean, cov
+
+
+@given(seeds, st.floats(0.1, 3.0), st.floats(1e-3, 100.0))
+@settings(max_examples=30, deadline=None)
+def test_prediction_is_the_kalman_prediction_of_the_ncv_model(seed, dt, q):
+    mean, cov = random_state(np.random.default_rng(seed))
+    transition, noise = constant_velocity_model(dt, q)
+    expected_mean, expected_cov = kalman_predict(mean, cov, transition[:2, :2], noise[:2, :2])
+    got_mean, got_cov = ncv_predict(mean, cov, dt, q)
+    np.testing.assert_allclose(got_mean, expected_mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got_cov, expected_cov, rtol=1e-12, atol=1e-10)
+
+
+def dense_aggregate(method, prior_mean, prior_cov, summaries, noise_var):
+    """Eqs. (8)-(20) on the state, expert by expert, with explicit inverses and
+    determinants: each expert's posterior is the Kalman update of the prior with its
+    summary; beta_i = 1/2 log(det P0 / det P_i) (GPoE, RBCM) or 1."""
+    h = np.array([1.0, 0.0])
+    prior_precision = np.linalg.inv(prior_cov)
+    precisions, informations, betas = [], [], []
+    for z, r in zip(summaries, noise_var):
+        precision = prior_precision + np.outer(h, h) / r
+        cov = np.linalg.inv(precision)
+        mean = cov @ (prior_precision @ prior_mean + h * z / r)
+        beta = 0.5 * np.log(np.linalg.det(prior_cov) / np.linalg.det(cov))
+        betas.append(beta if method in ("gpoe", "rbcm") else 1.0)
+        precisions.append(precision)
+        informations.append(precision @ mean)
+    if len(summaries) == 1:
+        cov = np.linalg.inv(precisions[0])
+        return cov @ informations[0], cov
+    precision = sum(b * p for b, p in zip(betas, precisions))
+    information = sum(b * i for b, i in zip(betas, informations))
+    if method in ("bcm", "rbcm"):
+        precision = precision + (1.0 - sum(betas)) * prior_precision
+        information = information + (1.0 - sum(betas)) * prior_precision @ prior_mean
+    cov = np.linalg.inv(precision)
+    return cov @ information, cov
+
+
+@pytest.mark.parametrize("method", ["poe", "gpoe", "bcm", "rbcm"])
+@given(seed=seeds, n_experts=st.integers(1, 5))
+@settings(max_examples=25, deadline=None)
+def test_fused_update_is_the_aggregation_of_the_experts_local_posteriors(method, seed, n_experts):
+    rng = np.random.default_rng(seed)
+    mean, cov = random_state(rng)
+    summaries = mean[0] + rng.normal(0.0, 5.0, n_experts)
+    noise_var = rng.uniform(0.5, 20.0, n_experts)
+    expected_mean, expected_cov = dense_aggregate(method, mean, cov, summaries, noise_var)
+    got_mean, got_cov = fused_update(method, mean, cov, summaries, noise_var)
+    np.testing.assert_allclose(got_mean, expected_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got_cov, expected_cov, rtol=1e-9, atol=1e-9)
+    # the experts' own posteriors, as the dense reference builds them
+    means, covs = expert_posteriors(mean, cov, summaries, noise_var)
+    for z, r, m, c in zip(summaries, noise_var, means, covs):
+        one_mean, one_cov = dense_aggregate(method, mean, cov, [z], [r])
+        np.testing.assert_allclose(m, one_mean, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(c, one_cov, rtol=1e-9, atol=1e-9)
+
+
+@given(seed=seeds, n_experts=st.integers(1, 6))
+@settings(max_examples=30, deadline=None)
+def test_step_likelihood_is_the_dense_gaussian(seed, n_experts):
+    rng = np.random.default_rng(seed)
+    prior_mean, prior_var = rng.normal(0.0, 10.0), rng.uniform(0.1, 50.0)
+    noise_var = rng.uniform(0.2, 30.0, n_experts)
+    summaries = prior_mean + rng.normal(0.0, 6.0, n_experts)
+    cov = prior_var * np.ones((n_experts, n_experts)) + np.diag(noise_var)
+    expected = multivariate_normal(np.full(n_experts, prior_mean), cov).logpdf(summaries)
+    got = step_log_likelihood(np.array(prior_mean), np.array(prior_var), summaries, noise_var)
+    np.testing.assert_allclose(got, expected, rtol=1e-10)
+
+
+@given(seed=seeds, q=st.floats(0.01, 50.0))
+@settings(max_examples=20, deadline=None)
+def test_bcm_window_likelihood_and_posterior_are_the_dense_ncv_gp(seed, q):
+    """With BCM the filtered window is exact GP regression with the integrated Wiener-velocity
+    kernel: the summed step likelihoods equal the dense marginal likelihood of every summary
+    (prior state at the window start, kernel from agents.gp.NCVPrior, noise per summary), and
+    the final posterior mean is the GP's predictive mean at the last time."""
+    rng = np.random.default_rng(seed)
+    start_mean, start_cov = random_state(rng)
+    steps, times, values, noise = [], [], [], []
+    time = 0.0
+    for _ in range(int(rng.integers(1, 6))):
+        dt = float(rng.integers(1, 3))
+        time += dt
+        m = int(rng.integers(1, 4))
+        summary = start_mean[0] + start_mean[1] * time + rng.normal(0.0, 4.0, m)
+        spread = rng.uniform(0.0, 3.0, m)
+        steps.append(WindowStep(dt, summary[None], spread[None], start_mean[None], start_cov[None]))
+        times += [time] * m
+        values += list(summary)
+        noise += list(1.0 + spread)
+    times, values = np.array(times), np.array(values)
+    basis = np.column_stack([np.ones_like(times), times])
+    kernel = basis @ start_cov @ basis.T + q * gp.NCVPrior(0.0, 0.0).unit_kernel(times, times)
+    expected = multivariate_normal(basis @ start_mean, kernel + np.diag(noise)).logpdf(values)
+    log_likelihood, mean, cov, _ = filter_window("bcm", steps, np.array([q]), np.array([1.0]))
+    np.testing.assert_allclose(log_likelihood[0], expected, rtol=1e-9)
+    last = (
+        np.array([1.0, time]) @ start_cov @ basis.T
+        + q * gp.NCVPrior(0.0, 0.0).unit_kernel(np.array([time]), times)[0]
+    )
+    gp_mean = (
+        start_mean[0]
+        + start_mean[1] * time
+        + last @ np.linalg.solve(kernel + np.diag(noise), values - basis @ start_mean)
+    )
+    np.testing.assert_allclose(mean[0, 0], gp_mean, rtol=1e-9, atol=1e-9)
+
+
+def test_newton_step_solves_a_quadratic_and_respects_its_limits():
+    h = 0.05
+    x = np.array([0.0, 0.0, 0.0])
+    optimum = np.array([0.3, -0.7, 4.0])  # the last lies beyond the largest step
+
+    def f(x):
+        return -((x - optimum) ** 2)
+
+    step = newton_step(np.stack([f(x), f(x + h), f(x - h)]), h, max_step=1.0)
+    np.testing.assert_allclose(step, [0.3, -0.7, 1.0], rtol=1e-9)
+    # convex (no maximum nearby): the largest step uphill; non-finite centre: no step
+    convex = np.array([[0.0], [1.0], [0.5]])
+    np.testing.assert_allclose(newton_step(convex, h, 1.0), [1.0])
+    broken = np.array([[np.nan], [1.0], [0.5]])
+    np.testing.assert_allclose(newton_step(broken, h, 1.0), [0.0])
+    infinite_below = np.array([[0.0], [-1.0], [-np.inf]])
+    np.testing.assert_allclose(newton_step(infinite_below, h, 1.0), [1.0])
+
+
+def measurement_obs(t, points, sensors, size=8):
+    measurements = np.zeros((size, 2))
+    mask = np.zeros(size, dtype=np.int8)
+    sensor = np.zeros(size, dtype=np.int64)
+    measurements[: len(points)] = points
+    mask[: len(points)] = 1
+    sensor[: len(points)] = sensors
+    return {"t": t, "measurements": measurements, "mask": mask, "sensor": sensor}
+
+
+def test_an_experts_local_posterior_uses_only_its_own_data_and_the_broadcast_prior():
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
+    rng = np.random.default_rng(3)
+    tracker = StateSpaceDGPT(aggregation="rbcm")
+    tracker.reset(spec)
+    for t in range(6):
+        truth = np.array([5.0 + 2.0 * t, 3.0 + t])
+        points = truth + rng.normal(0.0, 1.0, (3, 2))
+        tracker.update(measurement_obs(t, points, [0, 1, 2]))
+    points = np.array([16.5, 9.2]) + rng.normal(0.0, 1.0, (3, 2))
+    changed = points.copy()
+    changed[1] += [7.0, -4.0]  # sensor 1 alone reports something else
+    one, other = copy.deepcopy(tracker), copy.deepcopy(tracker)
+    one.update(measurement_obs(6, points, [0, 1, 2]))
+    other.update(measurement_obs(6, changed, [0, 1, 2]))
+    np.testing.assert_array_equal(one.expert_sensors_, [0, 1, 2])
+    for index in (0, 2):  # the other experts' local posteriors do not move
+        np.testing.assert_array_equal(one.expert_means_[:, index], other.expert_means_[:, index])
+    assert np.all(np.abs(one.expert_means_[:, 1, 0] - other.expert_means_[:, 1, 0]) > 1.0)
+    assert np.all(one.mean_[:, 0] != other.mean_[:, 0])  # the aggregate does
+
+
+@pytest.mark.parametrize("true_q", [0.0, 25.0])
+def test_learns_q_on_the_nearly_constant_velocity_path_it_models(true_q):
+    """Three summaries per step of a target that moves by the NCV model itself, 160 steps
+    in the window: q = 0 (constant velocity) drives q to its floor; q = 25 m^2/s^3 is
+    recovered with |log(q_hat / q)| < 0.4, about 3.5 standard errors of the maximum-
+    likelihood log q from 160 steps (sqrt(2 / 160) = 0.11; seeds 11-13 gave 0.01-0.12)."""
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (30.0, 0.0), (0.0, 30.0)), n_steps=160)
+    rng = np.random.default_rng(11)
+    tracker = StateSpaceDGPT(aggregation="bcm", window=160)
+    tracker.reset(spec)
+    state = np.array([[0.0, 3.0], [0.0, -2.0]])
+    transition, noise = constant_velocity_model(1.0, true_q)
+    for t in range(160):
+        if t:
+            state = state @ transition[:2, :2].T + rng.multivariate_normal(
+                np.zeros(2), noise[:2, :2] + 1e-12 * np.eye(2), 2
+            )
+        points = state[:, 0] + rng.normal(0.0, 1.0, (3, 2))
+        tracker.update(measurement_obs(t, points, [0, 1, 2]))
+    learnt = np.exp(tracker.log_q_)
+    if true_q == 0.0:
+        assert np.all(learnt < 1e-3), learnt
+    else:
+        assert np.all(np.abs(np.log(learnt / true_q)) < 0.4), learnt
+
+
+def test_episode_is_finite_and_reports_its_fits():
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    obs, info = env.reset(seed=1000)
+    tracker = StateSpaceDGPT()
+    tracker.reset(info["problem_spec"])
+    done = False
+    while not done:
+        estimate = tracker.update(obs)
+        assert np.all(np.isfinite(estimate.mean)) and np.all(estimate.var > 0)
+        assert np.all(np.isfinite(estimate.ucb)) and np.all(estimate.ucb > 0)
+        obs, _, terminated, truncated, _ = env.step(estimate.mean)
+        done = terminated or truncated
+    diagnostics = tracker.diagnostics()
+    assert 0.0 <= diagnostics["share_at_bound"] <= 1.0 and tracker.fits_ > 100
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"aggregation": "mean"}, "aggregation"),
+        ({"window": 0}, "window"),
+        ({"delta": 1.0}, "delta"),
+        ({"gating": "yes"}, "gating"),
+    ],
+)
+def test_bad_arguments_name_themselves(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        StateSpaceDGPT(**kwargs)
