@@ -6,7 +6,8 @@
    used): waking the nearest n for every n, waking all, a random policy, the tuned rules.
 3. Writes docs/rl_sensors_v1.md (interquartile mean of the return with a 95 % bootstrap
    interval, mean NRMSE, sensors woken per step, and the paired difference to the best
-   rule seed by seed) and docs/figures/rl_sensors_v1_pareto.png (sensors woken per step
+   rule seed by seed; with agents, also their paired differences to every tuned rule) and
+   docs/figures/rl_sensors_v1_pareto.png (sensors woken per step
    against the mean error, every policy).
 
     python scripts/sensors_baselines.py                      # S1, clutter 5, 100 seeds
@@ -128,6 +129,31 @@ def _pooled(by_name: dict, agents: list[str], reference: np.ndarray) -> str:
     )
 
 
+def _against_each_rule(by_name: dict, agents: list[str], rules: list[str]) -> list[str]:
+    """Table lines: the agents' mean per-seed return and sensors per step, paired with each
+    adaptive rule's on the same seeds (the comparison the training-chosen best rule alone
+    does not settle when another rule does better on the evaluation seeds)."""
+
+    def per_seed(names, key):
+        return np.mean([[row[key] for row in by_name[name]] for name in names], axis=0)
+
+    lines = [
+        "",
+        f"The {len(agents)} agents together against each adaptive rule, paired by seed (mean "
+        "difference, 95 % t interval):",
+        "",
+        "| rule | return: agents - rule | sensors per step: agents - rule |",
+        "|---|---|---|",
+    ]
+    for rule in rules:
+        cells = []
+        for key in ("return", "per_step"):
+            difference, half = paired_interval(per_seed(agents, key) - per_seed([rule], key))
+            cells.append(f"{difference:+.1f} +- {half:.1f}")
+        lines.append(f"| {rule} | {cells[0]} | {cells[1]} |")
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
@@ -213,6 +239,10 @@ def main(argv=None) -> int:
             f"{nrmse:.2f} | {per_step:.1f} | {paired} |"
         )
         points.append((name, per_step, error))
+    if agents:
+        lines += _against_each_rule(
+            by_name, agents, [n for n in names if policies[n][0] in HEURISTIC_GRIDS]
+        )
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "rl_sensors_v1.md").write_text(text)
