@@ -31,7 +31,8 @@ __all__ = [
     "aggregate",
     "gamma_one_step",
     "gamma_anytime",
-    "convex_combination_bound",
+    "affine_combination_bound",
+    "mean_coefficients",
     "ucb_half_width",
     "cumulative_bound",
 ]
@@ -123,17 +124,12 @@ def gamma_anytime(step: np.ndarray | int, n_experts: np.ndarray | int, delta: fl
     return 2.0 * np.log(pi_t * np.maximum(np.asarray(n_experts, dtype=float), 1.0) / delta)
 
 
-def convex_combination_bound(std: np.ndarray, gamma: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """sum_i w_i gamma_i^(1/2) sigma_i / sum_i w_i: the bound on |f - mu| of a mean that is the
-    convex combination sum w_i mu_i / sum w_i, when every |f - mu_i| <= gamma_i^(1/2) sigma_i.
-
-    With w_i = sigma_i^-2 it is eq. (31) as printed (PoE weights); with w_i = beta_i
-    sigma_i^-2 it is the last line of Theorem 1's proof (GPoE) and Appendix A's bound for
-    RBCM (eq. (37) with the beta weights).
-    """
-    total = weights.sum(axis=-1)
-    bound = np.sum(weights * np.sqrt(gamma) * std, axis=-1) / np.maximum(total, _TINY)
-    return np.where(total > 0, bound, np.nan)
+def affine_combination_bound(std: np.ndarray, gamma: np.ndarray, coefficients: np.ndarray):
+    """sum_i |a_i| gamma_i^(1/2) sigma_i: the bound on |f - mu| of a mean that is the affine
+    combination mu = sum_i a_i mu_i with sum_i a_i = 1, when every |f - mu_i| <=
+    gamma_i^(1/2) sigma_i (then f - mu = sum_i a_i (f - mu_i)). With a_i >= 0 it is the
+    convex-combination bound of eq. (31) and of Theorem 1's and Appendix A's proofs."""
+    return np.sum(np.abs(coefficients) * np.sqrt(gamma) * std, axis=-1)
 
 
 def ucb_half_width(
@@ -143,22 +139,66 @@ def ucb_half_width(
     delta: float,
     valid: np.ndarray | None = None,
     step: int | None = None,
+    extra_var: np.ndarray | float = 0.0,
 ) -> np.ndarray:
-    """The UCB half-width of the aggregated mean (Theorems 1-2), holding with probability at
-    least 1 - ``delta``; with ``step`` given, the anytime gamma of Lemma 2 (each step's term
-    of Theorem 3's cumulative bound). Where no expert carries weight (all at the prior), the
-    bound is the prior's, gamma^(1/2) sigma_**.
+    """The UCB half-width of the aggregated mean (Theorems 1-2 in a form that holds for every
+    aggregation), with probability at least 1 - ``delta``; with ``step`` given, the anytime
+    gamma of Lemma 2 (each step's term of Theorem 3's cumulative bound).
+
+    The mean of :func:`aggregate` is the affine combination sum_i a_i mu_i + a_0 mu_0 with
+    a_i = beta_i sigma_i^-2 / P (P the aggregate precision) and, for BCM and RBCM,
+    a_0 = (1 - sum_i beta_i) sigma_**^-2 / P on the prior mean mu_0; the coefficients sum to
+    one. So the half-width is :func:`affine_combination_bound` over the experts and, where
+    a_0 != 0, the prior (|f - mu_0| <= gamma^(1/2) sigma_** with the prior's own share of
+    ``delta``: delta is split over M + 1 events then). For PoE and GPoE (a_0 = 0) this is
+    eq. (31) and Theorem 1. For RBCM it departs from Appendix A, whose
+    sum_i w_i gamma^(1/2) sigma_i / sum_i w_i bounds the distance to sum_i w_i mu_i /
+    sum_i w_i, which is the RBCM mean only when the beta_i sum to one; when they sum to
+    more, a_0 is negative and the prior's term widens the bound. One expert: Lemma 1 on
+    its prediction (what :func:`aggregate` returns); none: the prior's bound.
+
+    ``extra_var`` (broadcastable to ``prior_var``): variance that the experts' and the
+    prior's means share on top of ``var`` and ``prior_var`` (DGPT's trend estimate): the
+    weights come from ``var`` and ``prior_var``, as in the aggregate, and the bounds'
+    standard deviations from the sums.
     """
     _, var, prior_var_expanded, valid = _prepare(np.zeros_like(var), var, prior_var, valid)
-    n_experts = valid.sum(axis=-1)
-    gamma = (
-        gamma_one_step(n_experts, delta) if step is None else gamma_anytime(step, n_experts, delta)
+    coefficients, prior_coefficient = mean_coefficients(method, var, prior_var, valid)
+    n_valid = valid.sum(axis=-1)
+    events = n_valid + (prior_coefficient != 0)
+    gamma = gamma_one_step(events, delta) if step is None else gamma_anytime(step, events, delta)
+    extra_var = np.asarray(extra_var, dtype=float)
+    std = np.sqrt(var + extra_var[..., None])
+    prior_std = np.sqrt(prior_var_expanded[..., 0] + extra_var)
+    return (
+        affine_combination_bound(std, np.asarray(gamma)[..., None], coefficients)
+        + np.abs(prior_coefficient) * np.sqrt(gamma) * prior_std
     )
-    gamma = np.asarray(gamma)[..., None]
-    weights = _expert_weights(method, var, prior_var_expanded, valid) / var
-    bound = convex_combination_bound(np.sqrt(var), gamma, weights)
-    fallback = np.sqrt(gamma[..., 0] * prior_var_expanded[..., 0])
-    return np.where(np.isfinite(bound), bound, fallback)
+
+
+def mean_coefficients(method: str, var, prior_var, valid=None):
+    """``(a (..., M), a_0 (...))``: the aggregated mean of :func:`aggregate` as the affine
+    combination sum_i a_i mu_i + a_0 mu_0 of the experts' means and the prior mean
+    (sum a_i + a_0 = 1): a_i = beta_i sigma_i^-2 / P with P the aggregate precision, a_0 the
+    prior's share for BCM and RBCM ((1 - sum beta_i) sigma_**^-2 / P) and for PoE and GPoE
+    without a weighted expert (1); one expert: a = 1 on it, a_0 = 0; padding gets 0."""
+    _, var, prior_var_expanded, valid = _prepare(np.zeros_like(var), var, prior_var, valid)
+    beta = _expert_weights(method, var, prior_var_expanded, valid)
+    weights = beta / var
+    precision = weights.sum(axis=-1)
+    prior_precision = 1.0 / prior_var_expanded[..., 0]
+    if method in ("bcm", "rbcm"):
+        prior_weight = (1.0 - beta.sum(axis=-1)) * prior_precision
+    else:  # PoE and GPoE fall back to the prior only when no expert carries weight
+        prior_weight = np.where(precision > 0, 0.0, prior_precision)
+    total = precision + prior_weight
+    coefficients = weights / total[..., None]
+    prior_coefficient = prior_weight / total
+    n_valid = valid.sum(axis=-1)
+    single = n_valid == 1
+    coefficients = np.where(single[..., None], valid.astype(float), coefficients)
+    prior_coefficient = np.where(single, 0.0, np.where(n_valid == 0, 1.0, prior_coefficient))
+    return np.where(valid, coefficients, 0.0), prior_coefficient
 
 
 def cumulative_bound(one_step_bounds: np.ndarray) -> np.ndarray:

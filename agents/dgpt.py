@@ -572,15 +572,17 @@ class _Group:
         estimate, estimate_var = first._aggregate(
             mean_now[..., 0], var_now[..., 0], prior_var, self.data, 0.0, residual_var, self.valid
         )
-        # The theorems' expert variances are those of the coordinate: residual GP plus trend.
+        # The estimate aggregates the residual GPs; each expert's and the prior's coordinate
+        # also carries the trend's estimation variance.
         trend_var = self.data.prior_mean_variance(0.0, residual_var)
         ucb = agg.ucb_half_width(
             first.aggregation,
-            var_now[..., 0] + trend_var[..., None],
-            prior_var + trend_var,
+            var_now[..., 0],
+            prior_var,
             first.delta,
             valid=self.valid,
             step=(steps + 1)[:, None] if first.anytime_ucb else None,
+            extra_var=trend_var,
         )
         for index, (tracker, item) in enumerate(zip(self.trackers, self.own_data)):
             tracker.log_params_ = log_params[index].copy()

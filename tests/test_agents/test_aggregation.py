@@ -91,19 +91,49 @@ def test_gamma_splits_the_failure_probability():
 
 
 def test_ucb_by_hand_and_single_expert_lemma():
+    """RBCM with experts of variance 1 and 1/4 under a prior of 4: beta = 1/2 log 4 and
+    log 4 sum to 3/2 log 4 > 1, so the prior's coefficient in the mean is negative, the
+    failure probability is split over three events, and the bound is
+    gamma^(1/2) (|a_1| 1 + |a_2| 1/2 + |a_0| 2). PoE has no prior term (two events)."""
     var, prior, delta = np.array([1.0, 0.25]), 4.0, 0.01
-    gamma = 2 * np.log(2 / delta)
-    beta = 0.5 * np.log(prior / var)
-    weights = beta / var
-    expected = np.sum(weights * np.sqrt(gamma * var)) / weights.sum()
-    assert agg.ucb_half_width("rbcm", var, prior, delta) == pytest.approx(expected)
-    poe_weights = 1 / var
-    expected_poe = np.sum(poe_weights * np.sqrt(gamma * var)) / poe_weights.sum()
-    assert agg.ucb_half_width("poe", var, prior, delta) == pytest.approx(expected_poe)
+    beta = np.log(4.0) * np.array([0.5, 1.0])
+    precision = beta[0] / 1.0 + beta[1] / 0.25 + (1.0 - 1.5 * np.log(4.0)) / 4.0
+    a1, a2 = beta[0] / precision, beta[1] / 0.25 / precision
+    a0 = (1.0 - 1.5 * np.log(4.0)) / 4.0 / precision
+    assert a0 < 0 and a1 + a2 + a0 == pytest.approx(1.0)
+    gamma = 2 * np.log(3 / delta)
+    expected = np.sqrt(gamma) * (abs(a1) * 1.0 + abs(a2) * 0.5 + abs(a0) * 2.0)
+    assert agg.ucb_half_width("rbcm", var, prior, delta) == pytest.approx(expected, rel=1e-12)
+    gamma_poe = 2 * np.log(2 / delta)
+    expected_poe = np.sqrt(gamma_poe) * (0.2 * 1.0 + 0.8 * 0.5)  # weights 1 and 4 of 5
+    assert agg.ucb_half_width("poe", var, prior, delta) == pytest.approx(expected_poe, rel=1e-12)
     # one expert: Lemma 1, gamma^(1/2) sigma with gamma = 2 log(1 / delta)
     assert agg.ucb_half_width("gpoe", np.array([0.5]), prior, delta) == pytest.approx(
         np.sqrt(2 * np.log(1 / delta) * 0.5)
     )
+    # a shared extra variance widens every term's standard deviation, not the weights
+    widened = agg.ucb_half_width("rbcm", var, prior, delta, extra_var=3.0)
+    assert widened == pytest.approx(
+        np.sqrt(gamma) * (abs(a1) * 2.0 + abs(a2) * np.sqrt(3.25) + abs(a0) * np.sqrt(7.0)),
+        rel=1e-12,
+    )
+
+
+@pytest.mark.parametrize("method", METHODS)
+@given(
+    means=st.lists(st.floats(-50, 50), min_size=1, max_size=5),
+    fractions=st.lists(st.floats(0.01, 1.0), min_size=5, max_size=5),
+)
+@settings(max_examples=40, deadline=None)
+def test_mean_coefficients_reproduce_the_aggregated_mean(method, means, fractions):
+    """The coefficients the UCB is built on are those of the aggregate's mean: sum_i a_i mu_i
+    (prior mean 0) equals :func:`aggregate`'s mean, and sum a_i + a_0 = 1."""
+    mean = np.array(means)
+    var = 4.0 * np.array(fractions[: mean.size])
+    coefficients, prior_coefficient = agg.mean_coefficients(method, var, 4.0)
+    combined = agg.aggregate(method, mean, var, 4.0)
+    assert coefficients @ mean == pytest.approx(combined.mean, rel=1e-9, abs=1e-9)
+    assert coefficients.sum() + prior_coefficient == pytest.approx(1.0, rel=1e-12)
 
 
 def test_cumulative_bound_is_the_running_sum():

@@ -239,10 +239,12 @@ def dense_rbcm_estimate(data, log_params, gamma=None):
     """The step's estimate written out from the paper's formulas on the tracker's window
     data: every expert's dense GP posterior at tau = 0 (eqs. (6)-(7), SE kernel on the
     expert's own residuals), RBCM (eqs. (18)-(20)) over the experts, plus the trend and
-    its least-squares variance (R&W Sec. 2.7). With ``gamma``, also the UCB half-width of
-    Appendix A: sum_i w_i gamma^(1/2) s_i / sum_i w_i with w_i = beta_i / s_i^2, over the
-    experts' coordinate variances s_i^2 (residual GP plus trend) and their entropy weights
-    beta_i against the coordinate's prior variance."""
+    its least-squares variance (R&W Sec. 2.7). With ``gamma`` (a function of the number of
+    events: the experts, plus the prior when its coefficient is not 0), also the UCB
+    half-width: the RBCM mean is sum_i a_i mu_i + a_0 mu_0 with a_i = beta_i / (v_i P),
+    a_0 = (1 - sum beta) / (signal P), P the RBCM precision, and the bound is
+    gamma^(1/2) (sum_i |a_i| s_i + |a_0| s_0) with the coordinate's standard deviations
+    s_i^2 = v_i + trend variance, s_0^2 = signal + trend variance."""
     means, variances, bounds = np.zeros(2), np.zeros(2), np.zeros(2)
     for axis in range(2):
         signal, lengthscale, noise = np.exp(log_params[axis])
@@ -269,10 +271,14 @@ def dense_rbcm_estimate(data, log_params, gamma=None):
         means[axis] = mean + data.intercept[axis]
         variances[axis] = total_var + trend_var
         if gamma is not None:
-            coordinate_var = var + trend_var
-            beta = 0.5 * (np.log(signal + trend_var) - np.log(coordinate_var))
-            weights = beta / coordinate_var
-            bounds[axis] = np.sqrt(gamma) * np.sum(weights * np.sqrt(coordinate_var)) / np.sum(weights)
+            if mu.size == 1:
+                bounds[axis] = np.sqrt(gamma(1) * (var[0] + trend_var))
+            else:
+                a = total_var * beta / var
+                a0 = total_var * (1.0 - beta.sum()) / signal
+                spread = np.sum(np.abs(a) * np.sqrt(var + trend_var))
+                spread += abs(a0) * np.sqrt(signal + trend_var)
+                bounds[axis] = np.sqrt(gamma(mu.size + 1)) * spread
     return (means, variances) if gamma is None else (means, variances, bounds)
 
 
@@ -301,9 +307,10 @@ def test_estimate_is_the_rbcm_of_the_experts_local_posteriors(seed):
 
 @pytest.mark.parametrize("anytime", [False, True])
 def test_ucb_is_appendix_a_bound_on_the_experts_coordinate_variances(anytime):
-    """Every step's UCB half-width equals the dense bound with gamma = 2 log(M / delta)
-    (Theorems 1-2) or, anytime, 2 log(pi^2 t^2 M / (6 delta)) at step t = 1, 2, ... (Lemma 2):
-    a half-width scaled by 10 or 0.1, or an anytime step count off by 100, fails."""
+    """Every step's UCB half-width equals the dense bound around the RBCM mean with
+    gamma = 2 log(n / delta) (Theorems 1-2) or, anytime, 2 log(pi^2 t^2 n / (6 delta)) at
+    step t = 1, 2, ... (Lemma 2), n the events (experts and prior): a half-width scaled by 10
+    or 0.1, or an anytime step count off by 100, fails."""
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
     observation, info = env.reset(seed=4)
     delta = 0.01
@@ -314,10 +321,12 @@ def test_ucb_is_appendix_a_bound_on_the_experts_coordinate_variances(anytime):
         estimate = tracker.update(observation)
         data = tracker._data
         if data is not None and data.sensors.size > 1:
-            experts = data.sensors.size
-            gamma = 2 * np.log(experts / delta)
-            if anytime:
-                gamma = 2 * np.log(np.pi**2 * step**2 / 6 * experts / delta)
+
+            def gamma(events, step=step):
+                if anytime:
+                    return 2 * np.log(np.pi**2 * step**2 / 6 * events / delta)
+                return 2 * np.log(events / delta)
+
             _, _, bound = dense_rbcm_estimate(data, tracker.log_params_, gamma)
             np.testing.assert_allclose(estimate.ucb, bound, rtol=1e-7)
             checked += 1
