@@ -172,23 +172,13 @@ EASY = {
 }
 
 
-def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds(tmp_path):
+def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds(short_ppo):
     """An easy task: a compute cost that makes C = 20 expensive. 6144 PPO steps (about 25 s;
     with the default VecNormalize, 3072 were not enough for the running statistics to
     settle, without it they were) must learn to prefer C = 2. Over 12 held-out episodes, Welch's one-sided t-test of the
     returns must reject "PPO no better than random" at p < 1e-3 (the returns differ by many
     standard deviations when the task is learned, so the test is far from its threshold)."""
-    agent = train_agent(
-        "DGPTrackWindow-v0",
-        "ppo",
-        timesteps=6144,
-        seed=0,
-        n_envs=2,
-        out=tmp_path,
-        env_kwargs=EASY,
-        algo_kwargs={"n_steps": 256, "batch_size": 64},
-        progress=False,
-    )
+    agent = short_ppo("DGPTrackWindow-v0", EASY, timesteps=6144)
     env = gym.make("DGPTrackWindow-v0", **EASY)
     seeds = range(12)
     policy = ModelPolicy(agent.model, agent.normalizer)

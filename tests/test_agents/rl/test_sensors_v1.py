@@ -12,7 +12,6 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import dgpt_gym  # noqa: F401  (registers the environments)
 from agents.rl.evaluation import ModelPolicy, RandomPolicy, evaluate_policy_on_seeds
 from agents.rl.sensors_v1 import WAKE_COUNTS
-from agents.rl.training import train_agent
 
 ENV_ID = "DGPTrackSensors-v1"
 ALL = len(WAKE_COUNTS) - 1
@@ -192,24 +191,14 @@ def test_the_error_term_is_capped():
 EASY = {"scenario": "S1", "clutter_rate": 1.0, "energy_weight": 20.0, "max_episode_steps": 30}
 
 
-def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds_and_layouts(tmp_path):
+def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds_and_layouts(short_ppo):
     """An easy configuration: energy weighs 10x the default, so the large wake counts a
     random policy often picks (24 to all) cost several units of reward per step while
     waking a few nearest sensors keeps the track. 4096 PPO steps on 2 sub-environments
     must learn to wake few: over 12 held-out seeds (new paths and layouts) Welch's one-sided
     t-test must reject "PPO no better than random" at p < 1e-3, and the agent must wake
     fewer sensors per step than random does on average."""
-    agent = train_agent(
-        ENV_ID,
-        "ppo",
-        timesteps=4096,
-        seed=0,
-        n_envs=2,
-        out=tmp_path,
-        env_kwargs=EASY,
-        algo_kwargs={"n_steps": 256, "batch_size": 64},
-        progress=False,
-    )
+    agent = short_ppo(ENV_ID, EASY, timesteps=4096)
     env = gym.make(ENV_ID, **EASY)
     seeds = range(12)
     trained = evaluate_policy_on_seeds(env, ModelPolicy(agent.model, agent.normalizer), seeds)
