@@ -335,3 +335,26 @@ def test_the_likelihood_of_a_heavy_scan_is_summed_in_chunks(monkeypatch, rng):
     monkeypatch.setattr(likelihood_module, "CHUNK_ELEMENTS", 7 * 4)  # 4 measurements a chunk
     assert len(measurement_chunks(7, 23)) == 6
     np.testing.assert_allclose(model.log_likelihood(positions, measurements), dense, rtol=1e-12)
+
+
+@pytest.mark.parametrize("scenario", ["S1", "S4"])
+def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(scenario):
+    """Issue 12's calibration goals on steps where a sensor senses the target, sigma_z 1,
+    clutter rate 1, six training-seed episodes (n of about 750 sensed steps): the 3-sigma
+    interval covers each axis at least 99 % less three binomial standard errors
+    (3 sqrt(0.99 x 0.01 / n), about 1.1 points), and the median 2-D NEES lies in [0.7, 2.8]
+    (nominal 1.39; its sampling standard error here is about 0.07). A variance 10 times too
+    wide gives a median NEES near 0.1, 10 times too narrow near 10: either fails."""
+    errors, variances = [], []
+    for seed in range(1000, 1006):
+        env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=1.0)
+        result = run_episode(env, make_tracker("hybrid"), seed)
+        sensed = result.n_detecting > 0
+        errors.append((result.mean - result.truth)[sensed])
+        variances.append(result.var[sensed])
+    errors, variances = np.concatenate(errors), np.concatenate(variances)
+    n = errors.shape[0]
+    coverage = np.mean(np.abs(errors) <= 3.0 * np.sqrt(variances), axis=0)
+    assert n > 600
+    assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
+    assert 0.7 <= np.median(np.sum(errors**2 / variances, axis=1)) <= 2.8

@@ -9,6 +9,7 @@ import copy
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import problem_spec
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
@@ -25,7 +26,6 @@ from agents.state_space import (
 )
 from agents.state_space_dgpt import StateSpaceDGPT, newton_step
 from baselines.kalman import constant_velocity_model, kalman_predict
-from tests.conftest import problem_spec
 
 seeds = st.integers(0, 2**32 - 1)
 
