@@ -35,6 +35,14 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
         for aggregation in ("rbcm", "gpoe")
         for inputs in INPUTS
     ),
+    *(
+        (
+            f"dgpt-{aggregation}-ncv",
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": aggregation},
+        )
+        for aggregation in ("bcm", "rbcm")
+    ),
     ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact"}),
     ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper"}),
 )

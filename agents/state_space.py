@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.aggregation import AGGREGATIONS
+from baselines.kalman import reduce_mixture
 
 __all__ = [
     "ncv_predict",
@@ -36,6 +37,7 @@ __all__ = [
     "fused_update",
     "step_log_likelihood",
     "WindowStep",
+    "Manoeuvre",
     "filter_window",
 ]
 
@@ -153,25 +155,54 @@ class WindowStep:
     cov: np.ndarray
 
 
-def filter_window(method, steps, q, noise_var):
+@dataclass(frozen=True)
+class Manoeuvre:
+    """The second component of the process noise: at each step, with ``probability``, the
+    white-acceleration intensity is q + ``intensity`` (m^2/s^3) instead of q. The process is
+    then a two-component scale mixture of NCV GPs (a manoeuvre is a burst of acceleration);
+    every step's posterior is the moment-matched mixture of the two components' posteriors
+    (:func:`baselines.kalman.reduce_mixture`),
+    each weighted by its prior probability times its exact step likelihood (GPB1,
+    Bar-Shalom, Li & Kirubarajan Sec. 11.6)."""
+
+    intensity: float
+    probability: float
+
+    def components(self, q: np.ndarray) -> list[tuple[np.ndarray, float]]:
+        """``[(q, 1 - p), (q + intensity, p)]``."""
+        return [(q, 1.0 - self.probability), (q + self.intensity, self.probability)]
+
+
+def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = None):
     """Filter a window of steps from its oldest step's prior under ``q`` and ``noise_var``
     (both (..., 2): any leading batch, then the axis; a summary's variance is sigma_n^2 plus
-    its spread), aggregating each step's experts with ``method``.
+    its spread), aggregating each step's experts with ``method``; with ``manoeuvre``, each
+    axis's steps follow its two-component process noise (:class:`Manoeuvre`), the axes
+    weighing their components separately (so that they stay separate problems).
 
-    Returns ``(log_likelihood, mean, cov, prior)``: the summed :func:`step_log_likelihood`
-    of the steps (..., 2), the aggregated posterior after the last step (..., 2, 2) and
-    (..., 2, 2, 2), and the last step's prediction ``(mean, cov)``."""
+    Returns ``(log_likelihood, mean, cov)``: the window's log marginal likelihood, summed
+    over its steps (..., 2), and the aggregated posterior after the last step (..., 2, 2)
+    and (..., 2, 2, 2)."""
     shape = np.shape(q)
     mean = np.broadcast_to(steps[0].mean, shape + (2,))
     cov = np.broadcast_to(steps[0].cov, shape + (2, 2))
     total = np.zeros(shape)
-    prior = (mean, cov)
+    components = [(q, 1.0)] if manoeuvre is None else manoeuvre.components(q)
     for step in steps:
-        mean, cov = ncv_predict(mean, cov, step.dt, q)
-        prior = (mean, cov)
         summary_var = noise_var[..., None] + step.spread
-        total = total + step_log_likelihood(
-            mean[..., 0], cov[..., 0, 0], step.summaries, summary_var
-        )
-        mean, cov = fused_update(method, mean, cov, step.summaries, summary_var)
-    return total, mean, cov, prior
+        log_weights, means, covs = [], [], []
+        for intensity, probability in components:
+            prior_mean, prior_cov = ncv_predict(mean, cov, step.dt, intensity)
+            log_weights.append(
+                np.log(probability)
+                + step_log_likelihood(
+                    prior_mean[..., 0], prior_cov[..., 0, 0], step.summaries, summary_var
+                )
+            )
+            posterior = fused_update(method, prior_mean, prior_cov, step.summaries, summary_var)
+            means.append(posterior[0])
+            covs.append(posterior[1])
+        log_weights = np.stack(log_weights, axis=-1)
+        total = total + np.logaddexp.reduce(log_weights, axis=-1)
+        mean, cov = reduce_mixture(log_weights, np.stack(means, axis=-2), np.stack(covs, axis=-3))
+    return total, mean, cov

@@ -60,16 +60,24 @@ CANDIDATES = {
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": aggregation, "window": window},
         )
-        for aggregation in ("bcm", "rbcm")
-        for window in (8, 20, 50, 150)
+        for aggregation in ("bcm", "rbcm", "gpoe", "poe")
+        for window in (8, 20, 50)
+    },
+    **{
+        f"ss-plain-bcm-{window}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "bcm", "window": window, "manoeuvre_intensity": 0.0},
+        )
+        for window in (20, 50, 150)
     },
 }
 """Candidate models: the default (SE kernel around the pooled least-squares trend; also as
 the centralized GP and inside the hybrid filter), the
 paper's zero mean with and without bounds, and the NCV kernel with every expert's state
 integrated out (distributed with BCM / RBCM, and centralized), and the NCV GP in state-space
-form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`,
-BCM / RBCM, q learnt over the last 8, 20, 50 or 150 steps with data)."""
+form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`:
+``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-plain-bcm-<C>`` without; q learnt
+over the last C steps with data)."""
 
 SCENARIOS = ("S1", "S2", "S3", "S4")
 TRAJECTORIES = ("fixed", "random")
