@@ -1,9 +1,12 @@
 """Shared fixtures and helpers."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
 import dgpt_gym  # noqa: F401  (registers DGPTrack-v0 and the trackers)
+from dgpt_gym import make_tracker
+from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.problem import ProblemSpec
 
 
@@ -44,3 +47,43 @@ def z_tolerance(standard_error: float, z: float = 5.0) -> float:
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def sensed_calibration(tracker: str, scenario: str, seeds, clutter_rate: float = 1.0):
+    """``(coverage (2,), median NEES, n)`` of a registered tracker over the steps where a
+    sensor senses the target, pooled over one episode per seed (sigma_z 1): the share of
+    those steps whose error is within 3 standard deviations, per axis, and the median of
+    the 2-D NEES (nominal 1.39)."""
+    errors, variances = [], []
+    for seed in seeds:
+        env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=clutter_rate)
+        result = run_episode(env, make_tracker(tracker), seed)
+        sensed = result.n_detecting > 0
+        errors.append((result.mean - result.truth)[sensed])
+        variances.append(result.var[sensed])
+    errors, variances = np.concatenate(errors), np.concatenate(variances)
+    coverage = np.mean(np.abs(errors) <= 3.0 * np.sqrt(variances), axis=0)
+    return coverage, float(np.median(np.sum(errors**2 / variances, axis=1))), errors.shape[0]
+
+
+@pytest.fixture
+def short_ppo(tmp_path):
+    """``short_ppo(env_id, env_kwargs, timesteps)``: a PPO agent trained on 2 sub-environments
+    with seed 0 and small rollouts (256 steps, batches of 64), saved under ``tmp_path``."""
+    # imported here so that Stable-Baselines3 and torch load only for the tests that train
+    from agents.rl.training import train_agent
+
+    def train(env_id: str, env_kwargs: dict, timesteps: int):
+        return train_agent(
+            env_id,
+            "ppo",
+            timesteps=timesteps,
+            seed=0,
+            n_envs=2,
+            out=tmp_path,
+            env_kwargs=env_kwargs,
+            algo_kwargs={"n_steps": 256, "batch_size": 64},
+            progress=False,
+        )
+
+    return train

@@ -3,7 +3,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import problem_spec
+from conftest import problem_spec, sensed_calibration
 
 from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
 from agents.likelihood import PoissonLikelihood
@@ -345,16 +345,8 @@ def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(scenario):
     (3 sqrt(0.99 x 0.01 / n), about 1.1 points), and the median 2-D NEES lies in [0.7, 2.8]
     (nominal 1.39; its sampling standard error here is about 0.07). A variance 10 times too
     wide gives a median NEES near 0.1, 10 times too narrow near 10: either fails."""
-    errors, variances = [], []
-    for seed in range(1000, 1006):
-        env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=1.0)
-        result = run_episode(env, make_tracker("hybrid"), seed)
-        sensed = result.n_detecting > 0
-        errors.append((result.mean - result.truth)[sensed])
-        variances.append(result.var[sensed])
-    errors, variances = np.concatenate(errors), np.concatenate(variances)
-    n = errors.shape[0]
-    coverage = np.mean(np.abs(errors) <= 3.0 * np.sqrt(variances), axis=0)
+    coverage, median_nees, n = sensed_calibration("hybrid", scenario, range(1000, 1006))
     assert n > 600
     assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
-    assert 0.7 <= np.median(np.sum(errors**2 / variances, axis=1)) <= 2.8
+    assert 0.7 <= median_nees <= 2.8, median_nees
+
