@@ -48,6 +48,7 @@ SECTIONS = [
     "dgpt-step",
     "cpf-hybrid",
     "standard",
+    "ncv-step",
     "lockstep",
     "vector-env",
     "sklearn",
@@ -137,6 +138,18 @@ def bench_standard(episodes: int) -> dict:
         "KF-PDA step, median (ms, goal <= 0.2)": median_step_ms("pda", episodes),
         "IMM-PDA step, median (ms, goal <= 0.5)": median_step_ms("imm-pda", episodes),
         "clairvoyant step, median (ms)": median_step_ms("clairvoyant", episodes),
+    }
+
+
+def bench_ncv_step(episodes: int) -> dict:
+    """Median steps of DGPT-BCM-NCV (the state-space NCV GP) and of the default DGPT-RBCM
+    (window 3) in one run, and their ratio (S3, clutter rate 5)."""
+    ncv = median_step_ms("dgpt-bcm-ncv", episodes)
+    default = median_step_ms("dgpt-rbcm", episodes, window=3)
+    return {
+        "DGPT-BCM-NCV step, median (ms)": ncv,
+        "DGPT-RBCM step, window 3, median (ms)": default,
+        "DGPT-BCM-NCV / DGPT-RBCM": ncv / default,
     }
 
 
@@ -309,6 +322,10 @@ def main(argv: list[str] | None = None) -> int:
     if "standard" in args.only:
         print(f"\n## standard trackers ({args.episodes} episodes of S3, clutter rate 5)")
         for key, value in bench_standard(args.episodes).items():
+            print(f"{key}: {value:.3f}")
+    if "ncv-step" in args.only:
+        print(f"\n## state-space NCV DGPT step ({args.episodes} episodes of S3, clutter rate 5)")
+        for key, value in bench_ncv_step(args.episodes).items():
             print(f"{key}: {value:.3f}")
     if "lockstep" in args.only:
         blocks = args.episodes * 5
