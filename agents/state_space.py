@@ -15,7 +15,10 @@ shared by every expert (it is the network's broadcast estimate):
   (:func:`fused_update`); for BCM it is the exact posterior given all summaries (the
   information filter);
 - the marginal likelihood of a step's summaries is exact in closed form from network-wide
-  sums over the experts (:func:`step_log_likelihood`).
+  sums over the experts (:func:`step_log_likelihood`);
+- a manoeuvre component of the process noise (:class:`Manoeuvre`) makes each step's
+  posterior a likelihood-weighted mixture of two such updates; :func:`filter_window` runs a
+  window of steps through either model.
 
 Every function is pure and vectorized over leading axes; states are (..., 2) and
 covariances (..., 2, 2), with the position first.
@@ -142,11 +145,12 @@ def step_log_likelihood(prior_mean, prior_var, summaries, noise_var):
 
 @dataclass(frozen=True)
 class WindowStep:
-    """One step of the learning window: ``dt`` (s) since the step before it, ``summaries``
-    (2, M) of its experts per axis and their ``spread`` (2, M) (the summary's variance on
-    top of sigma_n^2, :class:`agents.gating.GatedSummaries`), and the broadcast posterior of
-    the state at the step before it, ``mean`` (2, 2) and ``cov`` (2, 2, 2) with the axes
-    first: the prior the window is filtered from when this step is its oldest."""
+    """One step with data in the learning window: ``dt`` (s) since the previous step with
+    data, ``summaries`` (2, M) of its experts per axis and their ``spread`` (2, M) (the
+    summary's variance on top of sigma_n^2, :class:`agents.gating.GatedSummaries`), and the
+    broadcast posterior of the state after that previous step, ``mean`` (2, 2) and ``cov``
+    (2, 2, 2) with the axes first: the prior the window is filtered from when this step is
+    its oldest. Steps without data in between are carried by ``dt``."""
 
     dt: float
     summaries: np.ndarray
@@ -160,10 +164,10 @@ class Manoeuvre:
     """The second component of the process noise: at each step, with ``probability``, the
     white-acceleration intensity is q + ``intensity`` (m^2/s^3) instead of q. The process is
     then a two-component scale mixture of NCV GPs (a manoeuvre is a burst of acceleration);
-    every step's posterior is the moment-matched mixture of the two components' posteriors
-    (:func:`baselines.kalman.reduce_mixture`),
-    each weighted by its prior probability times its exact step likelihood (GPB1,
-    Bar-Shalom, Li & Kirubarajan Sec. 11.6)."""
+    every step's posterior is the moment-matched mixture of the two components' posteriors,
+    each weighted by its prior probability times its exact step likelihood
+    (:func:`baselines.kalman.reduce_mixture`; the GPB1 algorithm of Bar-Shalom, Li &
+    Kirubarajan 2001, ch. 11)."""
 
     intensity: float
     probability: float
