@@ -6,7 +6,9 @@ sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RM
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
 (nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), the median
 step time, and the share of fitted steps that left a hyperparameter on a bound (%, where
-the tracker reports it); then a summary per candidate over the cells.
+the tracker reports it); then a summary per candidate over the cells. Runs go in lockstep
+blocks, where a tracker with a batched step (DGPT) is much cheaper per step than one
+without; compare step costs one episode at a time with ``scripts/bench.py``.
 
     python scripts/model_study.py                  # the built-in candidates
     python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
