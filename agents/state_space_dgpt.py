@@ -94,7 +94,8 @@ q_m = 400 m^2/s^3 (an acceleration burst of about 20 m/s^2 over a step) with pri
 probability 0.5 per step. Of the eight settings tried on training seeds 1000-1003 (S1-S4,
 both path modes, clutter 1 and 5: q_m 100, 400, 1600 at 0.05; 400 at 0.02, 0.2, 0.5, 0.8;
 1600 at 0.2), it had the lowest mean RMSE (18.6 m; the others 18.8-20.3 m) and the best
-3-sigma coverage but one. Without the component the tracker loses targets after manoeuvres
+3-sigma coverage but one (``python scripts/model_study.py --seeds 4 --candidates
+ss-manoeuvre-...``). Without the component the tracker loses targets after manoeuvres
 (docs/analysis.md)."""
 
 LOG_STEP = 0.05

@@ -66,6 +66,22 @@ CANDIDATES = {
         for window in (8, 20, 50)
     },
     **{
+        f"ss-manoeuvre-{intensity:g}-{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"manoeuvre_intensity": intensity, "manoeuvre_probability": probability},
+        )
+        for intensity, probability in (
+            (100.0, 0.05),
+            (400.0, 0.05),
+            (1600.0, 0.05),
+            (400.0, 0.02),
+            (400.0, 0.2),
+            (400.0, 0.5),
+            (400.0, 0.8),
+            (1600.0, 0.2),
+        )
+    },
+    **{
         f"ss-plain-bcm-{window}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": "bcm", "window": window, "manoeuvre_intensity": 0.0},
@@ -78,8 +94,8 @@ the centralized GP and inside the hybrid filter), the
 paper's zero mean with and without bounds, and the NCV kernel with every expert's state
 integrated out (distributed with BCM / RBCM, and centralized), and the NCV GP in state-space
 form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`:
-``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-plain-bcm-<C>`` without; q learnt
-over the last C steps with data)."""
+``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-manoeuvre-<q_m>-<p>`` with other
+manoeuvre settings, ``ss-plain-bcm-<C>`` without; q learnt over the last C steps with data)."""
 
 SCENARIOS = ("S1", "S2", "S3", "S4")
 TRAJECTORIES = ("fixed", "random")
