@@ -10,7 +10,7 @@ the tracker reports it); then a summary per candidate over the cells. Runs go in
 blocks, where a tracker with a batched step (DGPT) is much cheaper per step than one
 without; compare step costs one episode at a time with ``scripts/bench.py``.
 
-    python scripts/model_study.py                  # the built-in candidates
+    python scripts/model_study.py                  # one candidate of each kind
     python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
     python scripts/model_study.py --clutter-sensors all --candidates se-trend se-gate-4
     python scripts/model_study.py --clutter-sensors all --clutter-rates 1 --first-seed 0 \
@@ -97,6 +97,20 @@ form with the broadcast posterior as every expert's prior (:mod:`agents.state_sp
 ``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-manoeuvre-<q_m>-<p>`` with other
 manoeuvre settings, ``ss-plain-bcm-<C>`` without; q learnt over the last C steps with data)."""
 
+DEFAULT_CANDIDATES = (
+    "se-trend",
+    "se-zero",
+    "se-zero-loose",
+    "se-gate-5",
+    "ncv-local-bcm",
+    "ncv-local-rbcm",
+    "ncv-centralized",
+    "ss-bcm-20",
+    "ss-plain-bcm-50",
+)
+"""The candidates run without ``--candidates``: one of each kind (the rest are settings
+searched once and documented in docs/analysis.md)."""
+
 SCENARIOS = ("S1", "S2", "S3", "S4")
 TRAJECTORIES = ("fixed", "random")
 CLUTTER_RATES = (1.0, 5.0)
@@ -105,7 +119,11 @@ CLUTTER_RATES = (1.0, 5.0)
 def parse_args(argv):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
-        "--candidates", nargs="+", choices=sorted(CANDIDATES), default=list(CANDIDATES)
+        "--candidates",
+        nargs="+",
+        choices=sorted(CANDIDATES),
+        default=list(DEFAULT_CANDIDATES),
+        help="default: " + " ".join(DEFAULT_CANDIDATES),
     )
     parser.add_argument("--seeds", type=int, default=6, help="seeds FIRST .. FIRST+N-1")
     parser.add_argument(
