@@ -9,13 +9,15 @@ import copy
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import problem_spec, sensed_calibration
+from conftest import mixture_moments, problem_spec, sensed_calibration
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
 
 import dgpt_gym  # noqa: F401  (registers the environment)
+from agents import aggregation as agg
 from agents import gp
+from agents.gating import gate_measurements
 from agents.state_space import (
     Manoeuvre,
     WindowStep,
@@ -25,7 +27,7 @@ from agents.state_space import (
     ncv_predict,
     step_log_likelihood,
 )
-from agents.state_space_dgpt import StateSpaceDGPT, newton_step
+from agents.state_space_dgpt import LOG_STEP, StateSpaceDGPT, newton_step
 from baselines.kalman import constant_velocity_model, kalman_predict
 
 seeds = st.integers(0, 2**32 - 1)
@@ -209,6 +211,111 @@ def measurement_obs(t, points, sensors, size=8):
     mask[: len(points)] = 1
     sensor[: len(points)] = sensors
     return {"t": t, "measurements": measurements, "mask": mask, "sensor": sensor}
+
+
+def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
+    """One tracker step with data, then one without, recomputed densely: per component, the
+    NCV prediction (the Stone-Soup-checked Kalman prediction), the gated summaries, their
+    joint Gaussian likelihood (scipy) and the dense aggregate; the estimate is the mixture
+    weighted by prior probability times likelihood (moments component by component), the UCB
+    is the larger component bound plus its distance to the estimate, and the next-step
+    prediction carries q + p q_m with the q just learnt. Without data the components keep their prior weights."""
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
+    rng = np.random.default_rng(8)
+    # probability 0.2: unequal prior weights, so that the test sees them
+    tracker = StateSpaceDGPT(aggregation="rbcm", delta=0.01, manoeuvre_probability=0.2)
+    tracker.reset(spec)
+    for t in range(8):
+        truth = np.array([5.0 + 2.0 * t, 3.0 - t])
+        tracker.update(measurement_obs(t, truth + rng.normal(0.0, 1.0, (3, 2)), [0, 1, 2]))
+    before = (tracker.mean_.copy(), tracker.cov_.copy(), np.exp(tracker.log_q_))
+    # a manoeuvre (the target is 4 m off the constant-velocity path) and a clutter point
+    points = np.vstack([[25.0, -9.0] + rng.normal(0.0, 1.0, (3, 2)), [[18.0, -2.0]]])
+    estimate = tracker.update(measurement_obs(8, points, [0, 1, 2, 1]))
+    mean0, cov0, q = before
+    manoeuvre = tracker.manoeuvre
+    # learning: one Newton step on the window's likelihood under the two-component model
+    trial = np.log(q) + np.array([0.0, LOG_STEP, -LOG_STEP])[:, None]
+    window_likelihood, _, _ = filter_window(
+        "rbcm", list(tracker.steps_), np.exp(trial), np.ones(2), manoeuvre
+    )
+    np.testing.assert_allclose(
+        tracker.log_q_,
+        np.clip(np.log(q) + newton_step(window_likelihood, LOG_STEP, 1.0), *np.log([1e-4, 1e6])),
+        rtol=1e-12,
+    )
+    components = [
+        (q, 1.0 - manoeuvre.probability),
+        (q + manoeuvre.intensity, manoeuvre.probability),
+    ]
+    log_weights, means, covs, bounds = [], [], [], []
+    for intensity, probability in components:
+        prediction = []
+        for axis in range(2):
+            transition, noise = constant_velocity_model(1.0, intensity[axis])
+            prediction.append(
+                kalman_predict(mean0[axis], cov0[axis], transition[:2, :2], noise[:2, :2])
+            )
+        predicted_position = np.array([prediction[a][0][0] for a in range(2)])
+        predicted_var = np.array([prediction[a][1][0, 0] for a in range(2)])
+        gated = gate_measurements(
+            points,
+            np.array([0, 1, 2, 1]),
+            np.broadcast_to(predicted_position, points.shape),
+            np.broadcast_to(predicted_var + 1.0, points.shape),
+        )
+        log_weight, axis_means, axis_covs, axis_bounds = np.log(probability), [], [], []
+        for axis in range(2):
+            z, r = gated.summaries[:, axis], 1.0 + gated.spread[:, axis]
+            p = predicted_var[axis]
+            log_weight += multivariate_normal(
+                np.full(z.size, predicted_position[axis]),
+                p * np.ones((z.size, z.size)) + np.diag(r),
+            ).logpdf(z)
+            m, c = dense_aggregate("rbcm", *prediction[axis], z, r)
+            axis_means.append(m)
+            axis_covs.append(c)
+            expert_var = 1.0 / (1.0 / p + 1.0 / r)
+            axis_bounds.append(agg.ucb_half_width("rbcm", expert_var, p, 0.01))
+        log_weights.append(log_weight)
+        means.append(axis_means)
+        covs.append(axis_covs)
+        bounds.append(axis_bounds)
+    means, covs = np.array(means), np.array(covs)  # (component, axis, 2[, 2])
+    for axis in range(2):
+        mean, cov = mixture_moments(log_weights, means[:, axis], covs[:, axis])
+        np.testing.assert_allclose(tracker.mean_[axis], mean, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-9, atol=1e-9)
+        expected_ucb = max(bounds[k][axis] + abs(means[k, axis, 0] - mean[0]) for k in range(2))
+        np.testing.assert_allclose(estimate.ucb[axis], expected_ucb, rtol=1e-9)
+        # with the q learnt at this step, which the next step predicts with
+        learnt = np.exp(tracker.log_q_[axis])
+        transition, noise = constant_velocity_model(
+            1.0, learnt + manoeuvre.probability * manoeuvre.intensity
+        )
+        next_mean, next_cov = kalman_predict(mean, cov, transition[:2, :2], noise[:2, :2])
+        np.testing.assert_allclose(estimate.prior_next[0][axis], next_mean[0], rtol=1e-9)
+        np.testing.assert_allclose(estimate.prior_next[1][axis], next_cov[0, 0], rtol=1e-9)
+    manoeuvre_weight = np.exp(log_weights[1] - np.logaddexp(*log_weights))
+    assert 0.05 < manoeuvre_weight < 0.95, manoeuvre_weight  # both components matter
+    # a step without data: the prediction's mixture under the prior weights
+    mean1, cov1, q1 = tracker.mean_.copy(), tracker.cov_.copy(), np.exp(tracker.log_q_)
+    estimate = tracker.update(measurement_obs(9, np.empty((0, 2)), []))
+    for axis in range(2):
+        predictions = []
+        for intensity in (q1[axis], q1[axis] + manoeuvre.intensity):
+            transition, noise = constant_velocity_model(1.0, intensity)
+            predictions.append(
+                kalman_predict(mean1[axis], cov1[axis], transition[:2, :2], noise[:2, :2])
+            )
+        log_prior = np.log([1.0 - manoeuvre.probability, manoeuvre.probability])
+        mean, cov = mixture_moments(
+            log_prior, [m for m, _ in predictions], [c for _, c in predictions]
+        )
+        np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-9)
+        np.testing.assert_allclose(estimate.mean[axis], mean[0], rtol=1e-12)
+        larger = max(c[0, 0] for _, c in predictions)
+        np.testing.assert_allclose(estimate.ucb[axis], np.sqrt(2 * np.log(1 / 0.01) * larger))
 
 
 def test_an_experts_local_posterior_uses_only_its_own_data_and_the_broadcast_prior():
