@@ -163,7 +163,7 @@ def ucb_half_width(
     standard deviations from the sums.
     """
     _, var, prior_var_expanded, valid = _prepare(np.zeros_like(var), var, prior_var, valid)
-    coefficients, prior_coefficient = mean_coefficients(method, var, prior_var, valid)
+    coefficients, prior_coefficient = _coefficients(method, var, prior_var_expanded, valid)
     n_valid = valid.sum(axis=-1)
     events = n_valid + (prior_coefficient != 0)
     gamma = gamma_one_step(events, delta) if step is None else gamma_anytime(step, events, delta)
@@ -183,6 +183,11 @@ def mean_coefficients(method: str, var, prior_var, valid=None):
     prior's share for BCM and RBCM ((1 - sum beta_i) sigma_**^-2 / P) and for PoE and GPoE
     without a weighted expert (1); one expert: a = 1 on it, a_0 = 0; padding gets 0."""
     _, var, prior_var_expanded, valid = _prepare(np.zeros_like(var), var, prior_var, valid)
+    return _coefficients(method, var, prior_var_expanded, valid)
+
+
+def _coefficients(method, var, prior_var_expanded, valid):
+    """:func:`mean_coefficients` on arrays already through :func:`_prepare`."""
     beta = _expert_weights(method, var, prior_var_expanded, valid)
     weights = beta / var
     precision = weights.sum(axis=-1)

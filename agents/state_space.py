@@ -41,6 +41,7 @@ __all__ = [
     "step_log_likelihood",
     "WindowStep",
     "Manoeuvre",
+    "process_noise_components",
     "filter_window",
 ]
 
@@ -172,9 +173,13 @@ class Manoeuvre:
     intensity: float
     probability: float
 
-    def components(self, q: np.ndarray) -> list[tuple[np.ndarray, float]]:
-        """``[(q, 1 - p), (q + intensity, p)]``."""
-        return [(q, 1.0 - self.probability), (q + self.intensity, self.probability)]
+
+def process_noise_components(q: np.ndarray, manoeuvre: Manoeuvre | None):
+    """``[(intensity, prior probability), ...]`` of the process noise: ``[(q, 1)]`` without
+    a manoeuvre component, else ``[(q, 1 - p), (q + q_m, p)]``."""
+    if manoeuvre is None:
+        return [(q, 1.0)]
+    return [(q, 1.0 - manoeuvre.probability), (q + manoeuvre.intensity, manoeuvre.probability)]
 
 
 def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = None):
@@ -191,7 +196,7 @@ def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = Non
     mean = np.broadcast_to(steps[0].mean, shape + (2,))
     cov = np.broadcast_to(steps[0].cov, shape + (2, 2))
     total = np.zeros(shape)
-    components = [(q, 1.0)] if manoeuvre is None else manoeuvre.components(q)
+    components = process_noise_components(q, manoeuvre)
     for step in steps:
         summary_var = noise_var[..., None] + step.spread
         log_weights, means, covs = [], [], []

@@ -62,6 +62,7 @@ from agents.state_space import (
     filter_window,
     fused_update,
     ncv_predict,
+    process_noise_components,
     step_log_likelihood,
 )
 from baselines.kalman import reduce_mixture
@@ -189,10 +190,6 @@ class StateSpaceDGPT(TrackerBase):
         share = self.fits_at_bound_ / self.fits_
         return {"share_at_bound": share, "share_at_bound_process_noise": share}
 
-    def _components(self) -> list[tuple[np.ndarray, float]]:
-        q = np.exp(self.log_q_)
-        return [(q, 1.0)] if self.manoeuvre is None else self.manoeuvre.components(q)
-
     # -- one step -------------------------------------------------------------------------
 
     def update(self, obs: dict) -> Estimate:
@@ -214,15 +211,22 @@ class StateSpaceDGPT(TrackerBase):
         dt = (step - self.last_step_) * spec.dt
         predictions = [
             (ncv_predict(self.mean_, self.cov_, dt, q), probability)
-            for q, probability in self._components()
+            for q, probability in process_noise_components(np.exp(self.log_q_), self.manoeuvre)
         ]
         if not points.shape[0]:
-            means = np.stack([prediction[0] for prediction, _ in predictions])
-            covs = np.stack([prediction[1] for prediction, _ in predictions])
             log_weights = np.log([probability for _, probability in predictions])
-            mean, cov = reduce_mixture(log_weights, np.stack(means, -2), np.stack(covs, -3))
-            bounds = [self._ucb(c, None) for c in covs]
-            ucb = np.max([b + np.abs(m[:, 0] - mean[:, 0]) for b, m in zip(bounds, means)], axis=0)
+            mean, cov = reduce_mixture(
+                log_weights,
+                np.stack([prediction[0] for prediction, _ in predictions], axis=-2),
+                np.stack([prediction[1] for prediction, _ in predictions], axis=-3),
+            )
+            ucb = np.max(
+                [
+                    self._ucb(prior_cov, None) + np.abs(prior_mean[:, 0] - mean[:, 0])
+                    for (prior_mean, prior_cov), _ in predictions
+                ],
+                axis=0,
+            )
             return self._keep(step, mean, cov, ucb)
         hypotheses = [
             self._hypothesis(points, sensors, *prediction, p) for prediction, p in predictions
