@@ -15,7 +15,9 @@ shared by every expert (it is the network's broadcast estimate):
   (:func:`fused_update`); for BCM it is the exact posterior given all summaries (the
   information filter);
 - the marginal likelihood of a step's summaries is exact in closed form from network-wide
-  sums over the experts (:func:`step_log_likelihood`);
+  sums over the experts (:func:`pool_summaries`, :func:`step_log_likelihood`); with BCM and
+  PoE those sums also give the aggregate, so a window of steps is filtered from them alone,
+  for many episodes at once (:func:`filter_steps`);
 - a manoeuvre component of the process noise (:class:`Manoeuvre`) makes each step's
   posterior a likelihood-weighted mixture of two such updates; :func:`filter_window` runs a
   window of steps through either model.
@@ -27,6 +29,7 @@ covariances (..., 2, 2), with the position first.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,10 +42,16 @@ __all__ = [
     "expert_weights",
     "fused_update",
     "step_log_likelihood",
+    "PooledSummaries",
+    "pool_summaries",
+    "pooled_log_likelihood",
+    "pooled_update",
+    "POOLED_METHODS",
     "WindowStep",
     "Manoeuvre",
     "process_noise_components",
     "filter_window",
+    "filter_steps",
 ]
 
 _LOG_2PI = np.log(2.0 * np.pi)
@@ -95,6 +104,73 @@ def expert_weights(method: str, prior_var: np.ndarray, noise_var: np.ndarray) ->
     return 0.5 * np.log1p(np.asarray(prior_var)[..., None] / noise_var)
 
 
+class PooledSummaries(NamedTuple):
+    """A step's summaries z_i of variances s_i (per axis), reduced to the network-wide sums
+    that the exact step likelihood and a BCM or PoE aggregate need: ``count`` M,
+    ``precision`` G = sum 1 / s_i, ``mean`` zbar = sum (z_i / s_i) / G, ``residual``
+    R = sum (z_i - zbar)^2 / s_i and ``log_det`` sum log s_i, each (...,)."""
+
+    count: np.ndarray
+    precision: np.ndarray
+    mean: np.ndarray
+    residual: np.ndarray
+    log_det: np.ndarray
+
+
+POOLED_METHODS = ("poe", "bcm")
+"""The aggregations whose aggregate depends on the summaries only through
+:class:`PooledSummaries` (their weights beta_i do not depend on the prior)."""
+
+
+def pool_summaries(summaries: np.ndarray, noise_var: np.ndarray) -> PooledSummaries:
+    """:class:`PooledSummaries` of ``summaries`` (..., M), M >= 1, of variances
+    ``noise_var`` (..., M)."""
+    summaries = np.asarray(summaries, dtype=float)
+    noise_var = np.broadcast_to(np.asarray(noise_var, dtype=float), summaries.shape)
+    precision = (1.0 / noise_var).sum(axis=-1)
+    mean = (summaries / noise_var).sum(axis=-1) / precision
+    residual = ((summaries - mean[..., None]) ** 2 / noise_var).sum(axis=-1)
+    count = np.full(precision.shape, float(summaries.shape[-1]))
+    return PooledSummaries(count, precision, mean, residual, np.log(noise_var).sum(axis=-1))
+
+
+def pooled_log_likelihood(prior_mean, prior_var, pooled: PooledSummaries) -> np.ndarray:
+    """log p(z_1..z_M) of one step's summaries, z_i = x + e_i with x ~ N(``prior_mean``,
+    ``prior_var``) and e_i ~ N(0, s_i) independent, from their sums (:class:`PooledSummaries`):
+
+        -1/2 [M log 2 pi + sum log s_i + log(1 + p G) + R + (zbar - mu)^2 / (p + 1 / G)],
+
+    with p = ``prior_var`` and mu = ``prior_mean`` (the Gaussian integral over x; the
+    Sherman-Morrison form of the dense M x M covariance p 1 1^T + diag(s))."""
+    offset = pooled.mean - prior_mean
+    return -0.5 * (
+        pooled.count * _LOG_2PI
+        + pooled.log_det
+        + np.log1p(prior_var * pooled.precision)
+        + pooled.residual
+        + offset**2 / (prior_var + 1.0 / pooled.precision)
+    )
+
+
+def step_log_likelihood(prior_mean, prior_var, summaries, noise_var):
+    """log p(z_1..z_M) of one step's summaries (..., M) of variances ``noise_var``
+    (..., M) under the broadcast prediction N(``prior_mean``, ``prior_var``) of the
+    position: the exact marginal likelihood (:func:`pooled_log_likelihood`), from sums over
+    the experts that the network forms as it forms eq. (22)'s."""
+    return pooled_log_likelihood(prior_mean, prior_var, pool_summaries(summaries, noise_var))
+
+
+def pooled_update(method: str, mean, cov, pooled: PooledSummaries):
+    """The BCM or PoE aggregate of the experts' local posteriors (:func:`fused_update`) from
+    the step's :class:`PooledSummaries`: one Kalman update of N(``mean``, ``cov`` / a) with
+    the pseudo-summary zbar of variance 1 / G, a = 1 for BCM and M for PoE."""
+    if method not in POOLED_METHODS:
+        raise ValueError(f"pooled_update needs method in {list(POOLED_METHODS)}; got {method!r}")
+    if method == "poe":
+        cov = cov / np.asarray(pooled.count)[..., None, None]
+    return _kalman_update(mean, cov, pooled.mean, 1.0 / pooled.precision)
+
+
 def fused_update(method, mean, cov, summaries, noise_var):
     """Aggregate the experts' local posteriors (eqs. (8)-(20) on the state, information form).
 
@@ -105,43 +181,23 @@ def fused_update(method, mean, cov, summaries, noise_var):
     sum (beta_i z_i / sigma_i^2) / sum (beta_i / sigma_i^2) of variance
     1 / sum (beta_i / sigma_i^2). For BCM it is the exact posterior given every summary (the
     information filter). One expert gives its own posterior, as
-    :func:`agents.aggregation.aggregate` does.
+    :func:`agents.aggregation.aggregate` does. BCM and PoE go through
+    :func:`pooled_update`.
 
     ``mean`` (..., 2), ``cov`` (..., 2, 2), ``summaries`` (..., M) with M >= 1,
     ``noise_var`` (..., M). Returns the aggregated mean (..., 2) and covariance (..., 2, 2).
     """
+    if method in POOLED_METHODS:
+        return pooled_update(method, mean, cov, pool_summaries(summaries, noise_var))
     beta = expert_weights(method, cov[..., 0, 0], noise_var)
     if summaries.shape[-1] == 1:
         beta = np.ones(beta.shape)
     gain = beta / noise_var
     total_gain = gain.sum(axis=-1)
-    a = beta.sum(axis=-1) if method in ("poe", "gpoe") and summaries.shape[-1] > 1 else 1.0
+    a = beta.sum(axis=-1) if method == "gpoe" and summaries.shape[-1] > 1 else 1.0
     pseudo = (gain * summaries).sum(axis=-1) / total_gain
     a = np.asarray(a, dtype=float)[..., None, None]
     return _kalman_update(mean, cov / a, pseudo, 1.0 / total_gain)
-
-
-def step_log_likelihood(prior_mean, prior_var, summaries, noise_var):
-    """log p(z_1..z_M) of one step's summaries (..., M), z_i = x + e_i with x ~
-    N(``prior_mean``, ``prior_var``) and e_i ~ N(0, ``noise_var`` (..., M)) independent:
-    the exact marginal likelihood of the step under the broadcast prediction,
-
-        -1/2 [M log 2 pi + sum log s_i + log(1 + p G) + sum e_i^2 / s_i - p H^2 / (1 + p G)],
-
-    with p = ``prior_var``, e_i = z_i - mu, G = sum 1 / s_i, H = sum e_i / s_i: sums over the
-    experts, which the network forms as it forms eq. (22)'s."""
-    m = summaries.shape[-1]
-    innovation = summaries - prior_mean[..., None]
-    g = (1.0 / noise_var).sum(axis=-1)
-    h = (innovation / noise_var).sum(axis=-1)
-    shrink = 1.0 + prior_var * g
-    return -0.5 * (
-        m * _LOG_2PI
-        + np.log(noise_var).sum(axis=-1)
-        + np.log(shrink)
-        + (innovation**2 / noise_var).sum(axis=-1)
-        - prior_var * h**2 / shrink
-    )
 
 
 @dataclass(frozen=True)
@@ -192,26 +248,53 @@ def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = Non
     Returns ``(log_likelihood, mean, cov)``: the window's log marginal likelihood, summed
     over its steps (..., 2), and the aggregated posterior after the last step (..., 2, 2)
     and (..., 2, 2, 2)."""
-    shape = np.shape(q)
-    mean = np.broadcast_to(steps[0].mean, shape + (2,))
-    cov = np.broadcast_to(steps[0].cov, shape + (2, 2))
-    total = np.zeros(shape)
-    components = process_noise_components(q, manoeuvre)
+    data = []
     for step in steps:
         summary_var = noise_var[..., None] + step.spread
-        log_weights, means, covs = [], [], []
-        for intensity, probability in components:
-            prior_mean, prior_cov = ncv_predict(mean, cov, step.dt, intensity)
-            log_weights.append(
-                np.log(probability)
-                + step_log_likelihood(
-                    prior_mean[..., 0], prior_cov[..., 0, 0], step.summaries, summary_var
-                )
+        if method in POOLED_METHODS:
+            data.append((step.dt, True, pool_summaries(step.summaries, summary_var)))
+        else:
+            data.append((step.dt, True, (step.summaries, summary_var)))
+    return filter_steps(method, data, steps[0].mean, steps[0].cov, q, manoeuvre)
+
+
+def filter_steps(method, steps, mean, cov, q, manoeuvre: Manoeuvre | None = None):
+    """The filter of :func:`filter_window` over ``steps``, a sequence of ``(dt, valid,
+    data)``: ``data`` is the step's :class:`PooledSummaries` (BCM and PoE) or its
+    ``(summaries, summary_var)`` (any method); where ``valid`` is False the step is skipped
+    (the state and the likelihood are kept), so that windows of different lengths are
+    filtered together, padded at the front. Every argument broadcasts against ``q``
+    (..., 2); ``mean`` (..., 2) and ``cov`` (..., 2, 2) are the prior of the first step.
+    Returns ``(log_likelihood, mean, cov)`` as :func:`filter_window`."""
+    shape = np.shape(q)
+    mean = np.broadcast_to(mean, shape + (2,))
+    cov = np.broadcast_to(cov, shape + (2, 2))
+    total = np.zeros(shape)
+    components = process_noise_components(q, manoeuvre)
+    with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries
+        for dt, valid, data in steps:
+            log_weights, means, covs = [], [], []
+            for intensity, probability in components:
+                prior_mean, prior_cov = ncv_predict(mean, cov, dt, intensity)
+                if isinstance(data, PooledSummaries):
+                    log_likelihood = pooled_log_likelihood(
+                        prior_mean[..., 0], prior_cov[..., 0, 0], data
+                    )
+                    posterior = pooled_update(method, prior_mean, prior_cov, data)
+                else:
+                    log_likelihood = step_log_likelihood(
+                        prior_mean[..., 0], prior_cov[..., 0, 0], *data
+                    )
+                    posterior = fused_update(method, prior_mean, prior_cov, *data)
+                log_weights.append(np.log(probability) + log_likelihood)
+                means.append(posterior[0])
+                covs.append(posterior[1])
+            log_weights = np.stack(log_weights, axis=-1)
+            step_mean, step_cov = reduce_mixture(
+                log_weights, np.stack(means, axis=-2), np.stack(covs, axis=-3)
             )
-            posterior = fused_update(method, prior_mean, prior_cov, step.summaries, summary_var)
-            means.append(posterior[0])
-            covs.append(posterior[1])
-        log_weights = np.stack(log_weights, axis=-1)
-        total = total + np.logaddexp.reduce(log_weights, axis=-1)
-        mean, cov = reduce_mixture(log_weights, np.stack(means, axis=-2), np.stack(covs, axis=-3))
+            valid = np.asarray(valid)
+            total = np.where(valid, total + np.logaddexp.reduce(log_weights, axis=-1), total)
+            mean = np.where(valid[..., None], step_mean, mean)
+            cov = np.where(valid[..., None, None], step_cov, cov)
     return total, mean, cov

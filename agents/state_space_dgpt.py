@@ -30,7 +30,10 @@ manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
    data, re-filtered from the broadcast posterior before the oldest of them
    (:func:`agents.state_space.filter_window`): one Newton step in log q per step, from the
    likelihood at q e^(-h), q, q e^h, warm-started from the last step's q (Sec. IV-D: few
-   iterations, warm-started). Steps 1-4 use q before this step's update.
+   iterations, warm-started). Steps 1-4 use q before this step's update. With BCM and PoE
+   the window is filtered from each step's pooled sums
+   (:class:`agents.state_space.PooledSummaries`, formed once when the step is taken), and
+   many episodes in lockstep are filtered together (:meth:`StateSpaceDGPT.update_batch`).
 
 An expert's local posterior depends on its own summary and the broadcast prior only, and
 the prior carries the earlier steps exactly because the NCV GP is Markov in its state; with
@@ -50,18 +53,23 @@ detecting sensor's target is within it) and :data:`INITIAL_SPEED_STD` for the ve
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 
 import numpy as np
 
 from agents import aggregation as agg
 from agents.gating import gate_measurements
 from agents.state_space import (
+    POOLED_METHODS,
     Manoeuvre,
+    PooledSummaries,
     WindowStep,
     expert_posteriors,
+    filter_steps,
     filter_window,
     fused_update,
     ncv_predict,
+    pool_summaries,
     process_noise_components,
     step_log_likelihood,
 )
@@ -106,6 +114,9 @@ MAX_LOG_STEP = 1.0
 """The largest change of log q in one step."""
 
 _BOUND_TOLERANCE = 1e-6
+
+_TRIAL_OFFSETS = np.array([0.0, LOG_STEP, -LOG_STEP])
+"""log q + these: the three likelihoods of a Newton step (:func:`newton_step`'s order)."""
 
 
 def newton_step(values: np.ndarray, h: float, max_step: float) -> np.ndarray:
@@ -170,6 +181,7 @@ class StateSpaceDGPT(TrackerBase):
         self.spec_ = spec
         self.noise_var_ = spec.model_noise_std**2
         self.steps_: deque[WindowStep] = deque(maxlen=self.window)
+        self.pooled_: deque[PooledSummaries] = deque(maxlen=self.window)  # BCM, PoE
         self.mean_: np.ndarray | None = None  # (2 axes, 2) broadcast posterior at last_step_
         self.cov_: np.ndarray | None = None  # (2, 2, 2)
         self.last_step_ = 0
@@ -193,6 +205,36 @@ class StateSpaceDGPT(TrackerBase):
     # -- one step -------------------------------------------------------------------------
 
     def update(self, obs: dict) -> Estimate:
+        return self.update_batch([self], [obs])[0]
+
+    @classmethod
+    def update_batch(
+        cls, trackers: Sequence[StateSpaceDGPT], observations: Sequence[dict]
+    ) -> list[Estimate]:
+        """One step of many episodes in lockstep: each tracker's steps 1-4 alone, then the
+        learning of every tracker that learns at this step, the BCM and PoE windows
+        filtered together (:func:`agents.state_space.filter_steps`); the numbers equal the
+        one-by-one ones, since :meth:`update` is this with one tracker."""
+        pending = [tracker._observe(obs) for tracker, obs in zip(trackers, observations)]
+        learners = [tracker for tracker, step in zip(trackers, pending) if step is not None]
+        learners = [tracker for tracker in learners if tracker._ready_to_learn()]
+        groups: dict[tuple, list[StateSpaceDGPT]] = {}
+        for tracker in learners:
+            if tracker.aggregation in POOLED_METHODS:
+                groups.setdefault((tracker.aggregation, tracker.manoeuvre), []).append(tracker)
+            else:
+                tracker._learn()
+        for group in groups.values():
+            _learn_pooled(group)
+        return [
+            tracker._finish(step) if step is not None else tracker.last_estimate_
+            for tracker, step in zip(trackers, pending)
+        ]
+
+    def _observe(self, obs: dict):
+        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb)`` for :meth:`_finish` after
+        the learning, or None when the step is finished (no data; its estimate is in
+        ``last_estimate_``)."""
         if getattr(self, "spec_", None) is None:
             raise RuntimeError("call reset(spec) before update(obs)")
         spec = self.spec_
@@ -202,7 +244,8 @@ class StateSpaceDGPT(TrackerBase):
         sensors = np.asarray(obs["sensor"])[mask]
         if self.mean_ is None:
             if not points.shape[0]:
-                return Estimate.uninformed(spec)
+                self.last_estimate_ = Estimate.uninformed(spec)
+                return None
             self.mean_ = np.column_stack([np.median(points, axis=0), np.zeros(2)])
             self.cov_ = np.zeros((2, 2, 2))
             self.cov_[:, 0, 0] = spec.sensing_range**2
@@ -227,7 +270,8 @@ class StateSpaceDGPT(TrackerBase):
                 ],
                 axis=0,
             )
-            return self._keep(step, mean, cov, ucb)
+            self.last_estimate_ = self._keep(step, mean, cov, ucb)
+            return None
         hypotheses = [
             self._hypothesis(points, sensors, *prediction, p) for prediction, p in predictions
         ]
@@ -240,22 +284,30 @@ class StateSpaceDGPT(TrackerBase):
         best = hypotheses[int(np.argmax(log_weights))]
         if self.data_mean_ is None:  # the first data step: its prior is the start state
             self.data_mean_, self.data_cov_, self.data_step_ = self.mean_, self.cov_, step
-        self.steps_.append(
-            WindowStep(
-                (step - self.data_step_) * spec.dt,
-                best["gated"].summaries.T,
-                best["summary_var"] - self.noise_var_,
-                self.data_mean_,
-                self.data_cov_,
-            )
+        window_step = WindowStep(
+            (step - self.data_step_) * spec.dt,
+            best["gated"].summaries.T,
+            best["summary_var"] - self.noise_var_,
+            self.data_mean_,
+            self.data_cov_,
         )
-        if sum(item.summaries.shape[1] for item in self.steps_) >= 3:
-            self._learn()
+        self.steps_.append(window_step)
+        if self.aggregation in POOLED_METHODS:
+            summary_var = np.full(2, self.noise_var_)[:, None] + window_step.spread
+            self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
         self.expert_sensors_ = best["gated"].sensors
         self.expert_means_, self.expert_covs_ = best["experts"]
         ucb = np.max([h["ucb"] + np.abs(h["mean"][:, 0] - mean[:, 0]) for h in hypotheses], axis=0)
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
-        return self._keep(step, mean, cov, ucb)
+        return step, mean, cov, ucb
+
+    def _finish(self, pending) -> Estimate:
+        """Broadcast the posterior of a step with data, after the learning (step 5)."""
+        return self._keep(*pending)
+
+    def _ready_to_learn(self) -> bool:
+        """Whether the window holds the three summaries a Newton step needs."""
+        return sum(item.summaries.shape[1] for item in self.steps_) >= 3
 
     def _hypothesis(self, points, sensors, prior_mean, prior_cov, probability) -> dict:
         """One component of the process noise at this step: gating around its prediction
@@ -284,16 +336,20 @@ class StateSpaceDGPT(TrackerBase):
         }
 
     def _learn(self) -> None:
-        """Step 5: one Newton step of log q per axis on the window's log likelihood at
+        """Step 5 alone: one Newton step of log q per axis on the window's log likelihood at
         log q, log q + h and log q - h."""
-        trial = self.log_q_ + np.array([0.0, LOG_STEP, -LOG_STEP])[:, None]
         log_likelihood, _, _ = filter_window(
             self.aggregation,
             list(self.steps_),
-            np.exp(trial),
+            np.exp(self.log_q_ + _TRIAL_OFFSETS[:, None]),
             np.full(2, self.noise_var_),
             self.manoeuvre,
         )
+        self._climb(log_likelihood)
+
+    def _climb(self, log_likelihood: np.ndarray) -> None:
+        """Move log q by the Newton step of the window likelihoods (3, 2) at the trial
+        points, within :data:`PROCESS_NOISE_BOUNDS`, and count whether it ends on a bound."""
         lower, upper = np.log(PROCESS_NOISE_BOUNDS)
         change = newton_step(log_likelihood, LOG_STEP, MAX_LOG_STEP)
         self.log_q_ = np.clip(self.log_q_ + change, lower, upper)
@@ -326,3 +382,40 @@ class StateSpaceDGPT(TrackerBase):
         return Estimate(
             mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, (next_mean[:, 0], next_cov[:, 0, 0])
         )
+
+
+def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
+    """Step 5 of BCM or PoE trackers that share the aggregation and the manoeuvre
+    component: their windows, padded at the front to the longest, filtered together from
+    their pooled sums at (episode, trial point, axis)."""
+    first = trackers[0]
+    length = max(len(tracker.steps_) for tracker in trackers)
+    padding = PooledSummaries(*np.zeros((5, 2)))
+    steps = []
+    for index in range(length):
+        rows = []
+        for tracker in trackers:
+            position = index - (length - len(tracker.steps_))
+            if position < 0:
+                rows.append((0.0, False, padding))
+            else:
+                rows.append((tracker.steps_[position].dt, True, tracker.pooled_[position]))
+        dt, valid, pooled = zip(*rows)
+        steps.append(
+            (
+                np.array(dt)[:, None, None],
+                np.array(valid)[:, None, None],
+                PooledSummaries(*(np.stack(field)[:, None, :] for field in zip(*pooled))),
+            )
+        )
+    log_q = np.stack([tracker.log_q_ for tracker in trackers])
+    log_likelihood, _, _ = filter_steps(
+        first.aggregation,
+        steps,
+        np.stack([tracker.steps_[0].mean for tracker in trackers])[:, None],
+        np.stack([tracker.steps_[0].cov for tracker in trackers])[:, None],
+        np.exp(log_q[:, None, :] + _TRIAL_OFFSETS[None, :, None]),
+        first.manoeuvre,
+    )
+    for tracker, values in zip(trackers, log_likelihood):
+        tracker._climb(values)

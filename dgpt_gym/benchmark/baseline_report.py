@@ -30,7 +30,9 @@ PAIRED_REFERENCE = "dgpt-rbcm"
 
 FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
-    ("clairvoyant", "imm-pda", "pda") + PAPER_GP_TRACKERS + ("hybrid", "hybrid-paper", "cpf")
+    ("clairvoyant", "imm-pda", "pda")
+    + PAPER_GP_TRACKERS
+    + ("dgpt-bcm-ncv", "hybrid", "hybrid-paper", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
 

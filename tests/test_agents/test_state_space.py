@@ -20,11 +20,14 @@ from agents import gp
 from agents.gating import gate_measurements
 from agents.state_space import (
     Manoeuvre,
+    PooledSummaries,
     WindowStep,
     expert_posteriors,
+    filter_steps,
     filter_window,
     fused_update,
     ncv_predict,
+    pool_summaries,
     step_log_likelihood,
 )
 from agents.state_space_dgpt import LOG_STEP, StateSpaceDGPT, newton_step
@@ -182,6 +185,50 @@ def test_two_component_step_is_the_dense_mixture(seed, probability, intensity):
     np.testing.assert_allclose(log_likelihood[0], np.log(sum(densities)), rtol=1e-9)
     expected = np.dot(densities, posterior_means) / sum(densities)
     np.testing.assert_allclose(mean[0, 0], expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["poe", "bcm"])
+def test_windows_filtered_together_padded_at_the_front_equal_each_alone(method):
+    """Two windows of 5 and 2 steps filtered in one batch (the short one padded with two
+    invalid steps in front, whose data are NaN so that any use of them shows) give, bit for
+    bit, what each gives alone: the padding neither moves the state nor adds likelihood."""
+    rng = np.random.default_rng(7)
+    manoeuvre = Manoeuvre(400.0, 0.5)
+    windows = []
+    for length in (5, 2):
+        mean, cov = random_state(rng, (2,))
+        steps = []
+        for _ in range(length):
+            m = int(rng.integers(1, 4))
+            summaries = mean[:, :1] + rng.normal(0.0, 5.0, (2, m))
+            steps.append((1.0, True, pool_summaries(summaries, rng.uniform(0.5, 3.0, (2, m)))))
+        windows.append((steps, mean, cov))
+    q = np.array([[0.5, 2.0], [3.0, 0.1]])  # (episode, axis)
+    alone = [
+        filter_steps(method, steps, mean, cov, q[i], manoeuvre)
+        for i, (steps, mean, cov) in enumerate(windows)
+    ]
+    nan_step = (np.nan, False, PooledSummaries(*np.full((5, 2), np.nan)))
+    long_steps, short_steps = windows[0][0], [nan_step] * 3 + windows[1][0]
+    together_steps = [
+        (
+            np.array([a[0], b[0]])[:, None],
+            np.array([a[1], b[1]])[:, None],
+            PooledSummaries(*(np.stack(pair) for pair in zip(a[2], b[2]))),
+        )
+        for a, b in zip(long_steps, short_steps)
+    ]
+    together = filter_steps(
+        method,
+        together_steps,
+        np.stack([windows[0][1], windows[1][1]]),
+        np.stack([windows[0][2], windows[1][2]]),
+        q,
+        manoeuvre,
+    )
+    for i, single in enumerate(alone):
+        for got, expected in zip(together, single):
+            np.testing.assert_array_equal(got[i], expected)
 
 
 def test_newton_step_solves_a_quadratic_and_respects_its_limits():
@@ -380,6 +427,67 @@ def test_episode_is_finite_and_reports_its_fits():
         done = terminated or truncated
     diagnostics = tracker.diagnostics()
     assert 0.0 <= diagnostics["share_at_bound"] <= 1.0 and tracker.fits_ > 100
+
+
+def test_lockstep_batch_equals_each_episode_alone():
+    """Trackers of every kind (BCM and PoE, whose windows are filtered together, and RBCM,
+    another window length, another manoeuvre component) on different seeds, stepped together
+    by ``run_episodes``, give bit for bit the estimates, variances and UCBs of each episode
+    run alone; and the learning did run in the batch."""
+    from dgpt_gym.benchmark.episodes import run_episode, run_episodes
+
+    settings = [
+        ({}, 0),
+        ({"aggregation": "poe"}, 1),
+        ({"aggregation": "rbcm"}, 2),
+        ({"window": 5}, 3),
+        ({"manoeuvre_intensity": 100.0}, 4),
+        ({}, 5),
+    ]
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0)
+    alone = [run_episode(env, StateSpaceDGPT(**kwargs), seed) for kwargs, seed in settings]
+    trackers = [StateSpaceDGPT(**kwargs) for kwargs, _ in settings]
+    together = run_episodes(
+        [gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0) for _ in settings],
+        trackers,
+        [seed for _, seed in settings],
+    )
+    for single, batched in zip(alone, together):
+        np.testing.assert_array_equal(single.mean, batched.mean)
+        np.testing.assert_array_equal(single.var, batched.var)
+        np.testing.assert_array_equal(single.ucb, batched.ucb)
+    assert all(tracker.fits_ > 100 for tracker in trackers)
+
+
+def test_windows_learnt_together_climb_as_each_window_filtered_alone():
+    """The lockstep learning of BCM trackers (their pooled windows of different lengths,
+    padded and filtered together) climbs, for each tracker, the likelihoods that
+    :func:`filter_window` gives on that tracker's own window steps."""
+    from agents.state_space_dgpt import _learn_pooled
+
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0)
+    trackers = []
+    for window, seed in ((20, 1000), (4, 1001), (9, 1002)):
+        obs, info = env.reset(seed=seed)
+        tracker = StateSpaceDGPT(window=window)
+        tracker.reset(info["problem_spec"])
+        for _ in range(14):
+            obs, *_ = env.step(tracker.update(obs).mean)
+        trackers.append(tracker)
+    # windows of three lengths, spanning the first step (dt 0) and a 4 s coverage gap
+    assert len({len(tracker.steps_) for tracker in trackers}) == 3
+    assert {step.dt for step in trackers[0].steps_} == {0.0, 1.0, 4.0}
+    climbed = {}
+    for tracker in trackers:
+        tracker._climb = lambda values, tracker=tracker: climbed.setdefault(id(tracker), values)
+    _learn_pooled(trackers)
+    for tracker in trackers:
+        trial = np.exp(tracker.log_q_ + np.array([0.0, LOG_STEP, -LOG_STEP])[:, None])
+        expected, _, _ = filter_window(
+            "bcm", list(tracker.steps_), trial, np.full(2, tracker.noise_var_), tracker.manoeuvre
+        )
+        np.testing.assert_allclose(climbed[id(tracker)], expected, rtol=1e-12)
+    assert len({round(float(climbed[id(t)][0, 0]), 6) for t in trackers}) == 3
 
 
 @pytest.mark.parametrize(
