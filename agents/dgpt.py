@@ -45,7 +45,7 @@ import numpy as np
 from agents import aggregation as agg
 from agents import gp
 from agents.gating import gate_measurements
-from agents.screening import initiation_scores, sensing_probability
+from agents.screening import MAX_TARGET_SPEED, ClutterScreen
 from agents.window import PRIOR_MEANS, ExpertData, SlidingWindow, StepRecord, padded_size
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
@@ -107,11 +107,6 @@ the broadcast prediction (:class:`agents.gp.NCVPrior`): a detecting sensor's tar
 within its sensing range (50 m in every scenario), and the velocity relative to the
 predicted one changes by less than 10 m/s between steps at the scenarios' accelerations. Wide
 enough that an expert with two or more points barely feels it."""
-
-
-MAX_TARGET_SPEED = 50.0
-"""m/s: the farthest a target moves per second, twice every scenario's top speed; a track
-starts (``clutter_sensors="all"``) only from candidates at consecutive steps this close."""
 
 
 class DGPT(TrackerBase):
@@ -263,9 +258,7 @@ class DGPT(TrackerBase):
         self.last_gated_out_ = 0  # measurements the hard gate dropped at the last step
         self._data: ExpertData | None = None  # the window's expert data of the last step
         self.step_ = -1
-        self.candidates_ = np.empty((0, 3))  # track-start candidates of the last step: x, y, score
-        self.previous_count_ = 1  # measurements at the step of candidates_
-        self.searching_ = True  # no track yet, or the last one was lost
+        self.screen_ = ClutterScreen(spec, self.admission_probability)
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's fitted steps whose maximum-
@@ -378,85 +371,16 @@ class DGPT(TrackerBase):
 
     def _screen(self, points: np.ndarray, sensors: np.ndarray, awake: np.ndarray | None):
         """With clutter at every sensor: the measurements of the sensors that sense the
-        target (:mod:`agents.screening`).
-
-        With a track: the reporting sensors whose posterior probability of sensing the
-        predicted target is at least 1/2. When none is (or there is no track, or the track
-        is lost because its predicted standard deviation exceeds the sensing range, so the
-        prediction no longer says which sensors sense it), a track starts at the best
-        candidate whose evidence, plus that of a consistent candidate of the last step
-        (closer than :data:`MAX_TARGET_SPEED` allows), beats the prior odds that a given
-        pair of measurements of the two steps is the target's, 1 / (n_t n_(t-1)); the
-        window restarts from the measurements around it.
-
-        Uses the rates and ``noise_std`` of the spec (as the hybrid filter does): the
-        paper's DGPT has no model of sensors that report clutter only."""
-        spec = self.spec_
-        clutter_density = spec.clutter_rate / spec.sensing_area
-        if not self.searching_:
-            mean, var = self.prior_next_
-            if np.sqrt(np.max(var)) > spec.sensing_range:
-                self.searching_ = True
-        if not self.searching_:
-            reporting, probability = sensing_probability(
-                points,
-                sensors,
-                spec.sensor_positions,
-                spec.sensing_range,
-                mean,
-                var,
-                np.exp(self.log_params_[:, -1]),
-                spec.detection_rate,
-                clutter_density,
-            )
-            keep = np.isin(sensors, reporting[probability >= self.admission_probability])
-            if np.any(keep):
-                self.candidates_ = np.empty((0, 3))
-                return points[keep], sensors[keep]
-        start = self._track_start(points, sensors, clutter_density, awake)
-        if start is None:
-            return points[:0], sensors[:0]
-        self.searching_ = False
-        self.window_ = SlidingWindow(self.window_.length, self.window_.capacity)
-        self.prior_next_ = None
-        self.expert_sensors_ = np.empty(0, dtype=np.int64)
-        return points[start], sensors[start]
-
-    def _track_start(self, points, sensors, clutter_density, awake) -> np.ndarray | None:
-        """The measurements (boolean (n,)) around the candidate a track starts from, or
-        None (:meth:`_screen`); ``candidates_`` (k, 3) keeps this step's candidates and
-        their scores for the next step. ``awake``: the observation's optional boolean per
-        sensor, False for sensors that could not report (asleep in the RL sensor task)."""
-        spec = self.spec_
-        noise_var = spec.model_noise_std**2
-        scores, witnesses = initiation_scores(
-            points,
-            sensors,
-            spec.sensor_positions,
-            spec.sensing_range,
-            noise_var,
-            spec.detection_rate,
-            clutter_density,
-            awake,
+        target (:class:`agents.screening.ClutterScreen`, with the broadcast prediction and
+        the learnt noise variance); a track that starts anew empties the window."""
+        keep, started = self.screen_.screen(
+            points, sensors, self.prior_next_, np.exp(self.log_params_[:, -1]), awake
         )
-        candidate = (witnesses > 0) & (scores > 0)
-        previous, previous_count = self.candidates_, self.previous_count_
-        self.candidates_ = np.column_stack([points[candidate], scores[candidate]])
-        self.previous_count_ = points.shape[0]
-        if not np.any(candidate) or not previous.shape[0]:
-            return None
-        reach = 3.0 * np.sqrt(2.0 * noise_var)
-        distance2 = np.sum((points[candidate][:, None] - previous[None, :, :2]) ** 2, axis=2)
-        consistent = distance2 <= (MAX_TARGET_SPEED * spec.dt + 2.0 * reach) ** 2
-        evidence = scores[candidate] + np.max(
-            np.where(consistent, previous[None, :, 2], -np.inf), axis=1
-        )
-        best = int(np.argmax(evidence))
-        if evidence[best] <= np.log(points.shape[0]) + np.log(previous_count):
-            return None
-        self.candidates_ = np.empty((0, 3))
-        centre = points[candidate][best]
-        return np.sum((points - centre) ** 2, axis=1) <= 18.0 * noise_var  # within 3 sqrt(2) sigma
+        if started:
+            self.window_ = SlidingWindow(self.window_.length, self.window_.capacity)
+            self.prior_next_ = None
+            self.expert_sensors_ = np.empty(0, dtype=np.int64)
+        return points[keep], sensors[keep]
 
     def _origin(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The line the experts model deviations from (``mean="prediction"``): the broadcast

@@ -23,6 +23,8 @@ is what makes a clutter point that other sensors fail to confirm recognisable.
   target lies in its disc and LR integrated over the prediction.
 - :func:`initiation_scores` (no track): for each measurement as a candidate position, the
   log-likelihood ratio summed over the other sensors that must sense a target there.
+- :class:`ClutterScreen`: one episode's use of both, for any tracker that broadcasts a
+  prediction (:class:`agents.dgpt.DGPT`, :class:`agents.state_space_dgpt.StateSpaceDGPT`).
 """
 
 from __future__ import annotations
@@ -31,13 +33,20 @@ import numpy as np
 from scipy import spatial, stats
 
 from agents.gating import group_starts
+from dgpt_gym.problem import ProblemSpec
 
 __all__ = [
+    "ClutterScreen",
+    "MAX_TARGET_SPEED",
     "scan_likelihood_ratio",
     "sensing_probability",
     "initiation_scores",
     "disc_probability",
 ]
+
+MAX_TARGET_SPEED = 50.0
+"""m/s: the farthest a target moves per second, twice every scenario's top speed; a track
+starts only from candidates at consecutive steps this close."""
 
 
 def scan_likelihood_ratio(
@@ -176,3 +185,108 @@ def initiation_scores(
     confirmed = np.bincount(keys // n_sensors, minlength=n)
     scores[confirmed < witnesses] = -np.inf  # a witness with no point near the candidate
     return scores, witnesses
+
+
+class ClutterScreen:
+    """Which of a step's measurements come from sensors that sense the target, with clutter
+    at every sensor (``clutter_sensors="all"``), for one episode of a tracker.
+
+    With a track (the tracker's prediction of the position): the reporting sensors whose
+    posterior probability of sensing the predicted target is at least
+    ``admission_probability`` (:func:`sensing_probability`). When none is (or there is no
+    track, or the track is lost because the predicted standard deviation exceeds the sensing
+    range, so the prediction no longer says which sensors sense it), a track starts at the
+    best candidate whose evidence (:func:`initiation_scores`), plus that of a consistent
+    candidate of the last step (closer than :data:`MAX_TARGET_SPEED` allows), beats the
+    prior odds that a given pair of measurements of the two steps is the target's,
+    1 / (n_t n_(t-1)); the tracker then restarts from the measurements around it.
+
+    Uses the rates and noise of the spec (as the hybrid filter does): the paper's DGPT has
+    no model of sensors that report clutter only.
+
+    Attributes: ``searching`` (no track yet, or the last one was lost), ``candidates``
+    (k, 3) the track-start candidates of the last step (x, y, score), ``previous_count``
+    the number of measurements at that step.
+    """
+
+    def __init__(self, spec: ProblemSpec, admission_probability: float = 0.5) -> None:
+        self.spec = spec
+        self.admission_probability = admission_probability
+        self.clutter_density = spec.clutter_rate / spec.sensing_area
+        self.candidates = np.empty((0, 3))
+        self.previous_count = 1
+        self.searching = True
+
+    def screen(self, points, sensors, prediction, noise_var, awake=None):
+        """The measurements of a step that count.
+
+        Args:
+            points: (n, 2) measurements; ``sensors`` (n,) their sensors.
+            prediction: ``(mean, var)`` (2,) each, the tracker's prediction of the
+                position at this step, or None without one.
+            noise_var: (2,) the measurement noise variance per axis.
+            awake: optional boolean per sensor, False for sensors that could not report
+                (asleep in the RL sensor task).
+
+        Returns ``(keep, started)``: a boolean (n,) over the measurements, and whether a
+        track starts from them (the tracker forgets its old one)."""
+        spec = self.spec
+        if not self.searching and (
+            prediction is None or np.sqrt(np.max(prediction[1])) > spec.sensing_range
+        ):
+            self.searching = True
+        if not self.searching:
+            reporting, probability = sensing_probability(
+                points,
+                sensors,
+                spec.sensor_positions,
+                spec.sensing_range,
+                prediction[0],
+                prediction[1],
+                noise_var,
+                spec.detection_rate,
+                self.clutter_density,
+            )
+            keep = np.isin(sensors, reporting[probability >= self.admission_probability])
+            if np.any(keep):
+                self.candidates = np.empty((0, 3))
+                return keep, False
+        start = self._track_start(points, sensors, awake)
+        if start is None:
+            return np.zeros(points.shape[0], dtype=bool), False
+        self.searching = False
+        return start, True
+
+    def _track_start(self, points, sensors, awake) -> np.ndarray | None:
+        """The measurements (boolean (n,)) around the candidate a track starts from, or
+        None; ``candidates`` keeps this step's candidates and their scores for the next."""
+        spec = self.spec
+        noise_var = spec.model_noise_std**2
+        scores, witnesses = initiation_scores(
+            points,
+            sensors,
+            spec.sensor_positions,
+            spec.sensing_range,
+            noise_var,
+            spec.detection_rate,
+            self.clutter_density,
+            awake,
+        )
+        candidate = (witnesses > 0) & (scores > 0)
+        previous, previous_count = self.candidates, self.previous_count
+        self.candidates = np.column_stack([points[candidate], scores[candidate]])
+        self.previous_count = points.shape[0]
+        if not np.any(candidate) or not previous.shape[0]:
+            return None
+        reach = 3.0 * np.sqrt(2.0 * noise_var)
+        distance2 = np.sum((points[candidate][:, None] - previous[None, :, :2]) ** 2, axis=2)
+        consistent = distance2 <= (MAX_TARGET_SPEED * spec.dt + 2.0 * reach) ** 2
+        evidence = scores[candidate] + np.max(
+            np.where(consistent, previous[None, :, 2], -np.inf), axis=1
+        )
+        best = int(np.argmax(evidence))
+        if evidence[best] <= np.log(points.shape[0]) + np.log(previous_count):
+            return None
+        self.candidates = np.empty((0, 3))
+        centre = points[candidate][best]
+        return np.sum((points - centre) ** 2, axis=1) <= 18.0 * noise_var  # within 3 sqrt(2) sigma

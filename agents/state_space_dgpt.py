@@ -43,6 +43,11 @@ likelihood is the exact one of all experts' summaries, not eq. (22)'s product of
 likelihoods: with a shared prior that product counts the prior's uncertainty once per expert
 and cannot tell it from the summaries' noise.
 
+With clutter at every sensor (``clutter_sensors="all"``), the sensors that do not sense the
+target are screened out before step 2, and tracks start and restart from measurements that
+the other sensors covering them confirm, as DGPT's do (:class:`agents.screening.ClutterScreen`
+with the broadcast prediction).
+
 sigma_n^2 is the sensors' noise variance, ``spec.model_noise_std ** 2`` (the hybrid filter
 and the Kalman trackers use it too); only q is learnt. Steps without measurements only
 predict, and the variance grows as the model says. The first measurements start the state
@@ -59,6 +64,7 @@ import numpy as np
 
 from agents import aggregation as agg
 from agents.gating import gate_measurements
+from agents.screening import ClutterScreen
 from agents.state_space import (
     POOLED_METHODS,
     Manoeuvre,
@@ -149,6 +155,9 @@ class StateSpaceDGPT(TrackerBase):
         manoeuvre_intensity: q_m (m^2/s^3), the extra white-acceleration intensity of a
             manoeuvre step (:class:`agents.state_space.Manoeuvre`); 0 gives the plain NCV GP.
         manoeuvre_probability: the prior probability of a manoeuvre at each step, in [0, 1).
+        admission_probability: with ``clutter_sensors="all"`` only: a reporting sensor's
+            measurements are used when its posterior probability of sensing the predicted
+            target is at least this (:class:`agents.screening.ClutterScreen`; DGPT's 1/2).
     """
 
     name = "dgpt-bcm-ncv"
@@ -161,6 +170,7 @@ class StateSpaceDGPT(TrackerBase):
         gating: bool = True,
         manoeuvre_intensity: float = MANOEUVRE["intensity"],
         manoeuvre_probability: float = MANOEUVRE["probability"],
+        admission_probability: float = 0.5,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.window = check_integer("window", window, low=1)
@@ -175,24 +185,33 @@ class StateSpaceDGPT(TrackerBase):
         self.manoeuvre = (
             Manoeuvre(intensity, probability) if intensity > 0 and probability > 0 else None
         )
+        self.admission_probability = check_real(
+            "admission_probability", admission_probability, low=0.0, high=1.0, low_inclusive=False
+        )
         self.name = f"dgpt-{self.aggregation}-ncv"
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
         self.noise_var_ = spec.model_noise_std**2
+        self.log_q_ = np.full(2, np.log(PROCESS_NOISE_START))
+        self.screen_ = ClutterScreen(spec, self.admission_probability)
+        self.prediction_ = None  # (mean, var) (2,) of the position at the next step
+        self.fits_ = 0
+        self.fits_at_bound_ = 0
+        self._start_track()
+
+    def _start_track(self) -> None:
+        """Forget the track (not the learnt q): the next measurements start a new one."""
         self.steps_: deque[WindowStep] = deque(maxlen=self.window)
         self.pooled_: deque[PooledSummaries] = deque(maxlen=self.window)  # BCM, PoE
         self.mean_: np.ndarray | None = None  # (2 axes, 2) broadcast posterior at last_step_
         self.cov_: np.ndarray | None = None  # (2, 2, 2)
         self.last_step_ = 0
-        self.log_q_ = np.full(2, np.log(PROCESS_NOISE_START))
         self.expert_sensors_ = np.empty(0, dtype=np.int64)
         self.expert_means_ = np.empty((2, 0, 2))  # local posteriors of the last step with data
         self.expert_covs_ = np.empty((2, 0, 2, 2))
         self.data_mean_ = self.data_cov_ = None  # broadcast posterior after the last data step
         self.data_step_ = 0
-        self.fits_ = 0
-        self.fits_at_bound_ = 0
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's learning steps that left q on a
@@ -242,6 +261,13 @@ class StateSpaceDGPT(TrackerBase):
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
+        if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
+            keep, started = self.screen_.screen(
+                points, sensors, self.prediction_, np.full(2, self.noise_var_), obs.get("awake")
+            )
+            points, sensors = points[keep], sensors[keep]
+            if started:
+                self._start_track()
         if self.mean_ is None:
             if not points.shape[0]:
                 self.last_estimate_ = Estimate.uninformed(spec)
@@ -379,6 +405,7 @@ class StateSpaceDGPT(TrackerBase):
         if self.manoeuvre is not None:  # the moments of the two components' predictions
             q = q + self.manoeuvre.probability * self.manoeuvre.intensity
         next_mean, next_cov = ncv_predict(mean, cov, self.spec_.dt, q)
+        self.prediction_ = (next_mean[:, 0], next_cov[:, 0, 0])
         return Estimate(
             mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, (next_mean[:, 0], next_cov[:, 0, 0])
         )
