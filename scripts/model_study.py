@@ -36,6 +36,9 @@ CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp": ("baselines.standard_gp:StandardGP", {"window": 3}),
     "hybrid": ("agents.hybrid:HybridFilter", {"window": 3}),
+    # references, not GP models: the accuracy floor and the strongest standard tracker
+    "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),
+    "imm-pda": ("baselines.pda:IMMPDAFilter", {}),
     "se-zero": ("agents.dgpt:DGPT", {"window": 3, "mean": "zero"}),
     "se-zero-loose": (
         "agents.dgpt:DGPT",

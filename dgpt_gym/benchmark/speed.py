@@ -155,17 +155,23 @@ def bench_ncv_step(episodes: int) -> dict:
 
 def bench_lockstep(episodes: int) -> dict:
     """Seconds per episode alone and in one lockstep block of ``episodes`` (S3, sigma_z 2,
-    clutter rate 5, window 3: a cell of the paper's grid), on the same seeds."""
+    clutter rate 5, window 3 for the SE trackers and the default 20 for DGPT-BCM-NCV: a cell
+    of the paper's grid), on the same seeds."""
     env_kwargs = {"scenario": "S3", "noise_std": 2.0, "clutter_rate": 5.0}
     seeds = list(range(episodes))
     results = {}
-    for tracker_id in ("dgpt-rbcm", "dgpt-gpoe-stgp", "gp"):
+    for tracker_id, kwargs in (
+        ("dgpt-rbcm", {"window": 3}),
+        ("dgpt-gpoe-stgp", {"window": 3}),
+        ("gp", {"window": 3}),
+        ("dgpt-bcm-ncv", {}),
+    ):
         env = gym.make("DGPTrack-v0", **env_kwargs)
         started = time.perf_counter()
-        alone = [run_episode(env, make_tracker(tracker_id, window=3), seed) for seed in seeds]
+        alone = [run_episode(env, make_tracker(tracker_id, **kwargs), seed) for seed in seeds]
         alone_time = (time.perf_counter() - started) / episodes
         envs = [gym.make("DGPTrack-v0", **env_kwargs) for _ in seeds]
-        trackers = [make_tracker(tracker_id, window=3) for _ in seeds]
+        trackers = [make_tracker(tracker_id, **kwargs) for _ in seeds]
         started = time.perf_counter()
         together = run_episodes(envs, trackers, seeds)
         block_time = (time.perf_counter() - started) / episodes
