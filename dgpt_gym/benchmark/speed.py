@@ -336,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
     if "lockstep" in args.only:
         blocks = args.episodes * 5
         print(
-            f"\n## lockstep blocks of {blocks} episodes (S3, sigma_z 2, clutter rate 5, window 3)"
+            f"\n## lockstep blocks of {blocks} episodes (S3, sigma_z 2, clutter rate 5, window 3; dgpt-bcm-ncv window 20)"
         )
         for key, value in bench_lockstep(blocks).items():
             print(f"{key}: {value}")
