@@ -409,11 +409,12 @@ class DGPT(TrackerBase):
         trend_var = data.prior_mean_variance(relative_time, residual_var)
         return combined.mean + data.prior_mean(relative_time), combined.var + trend_var
 
-    def set_estimate(self, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def set_estimate(self, estimate: np.ndarray, var=None) -> tuple[np.ndarray, np.ndarray]:
         """Take ``estimate`` (2,) as this step's estimate (the hybrid filter feeds its
         posterior back here) and return the next-step prediction (mean, var). With STGP the
         estimate is the spatial input of that prediction, which is recomputed; with TGP it
-        does not depend on the estimate."""
+        does not depend on the estimate. ``var`` (the posterior's variance) is not used:
+        the GP predicts from its window, not from the estimate's uncertainty."""
         self.estimate_ = np.asarray(estimate, dtype=float).copy()
         if self._spatial:
             group = _Group([self], [self._data])

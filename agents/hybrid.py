@@ -1,5 +1,8 @@
 """The hybrid Bayesian filter (paper Sec. VI): DGPT's next-step prediction is the prior of the
 target position, eq. (48), and the Poisson measurement likelihood, eq. (42), updates it.
+The DGPT is the paper's (:class:`agents.dgpt.DGPT`, ``gp="se"``) or the NCV GP in
+state-space form (:class:`agents.state_space_dgpt.StateSpaceDGPT`, ``gp="ncv"``), whose
+broadcast state then becomes its prior conditioned on the posterior position.
 
 Two updates, per step:
 
@@ -29,13 +32,23 @@ import numpy as np
 
 from agents.dgpt import DGPT
 from agents.likelihood import PoissonLikelihood
+from agents.state_space_dgpt import StateSpaceDGPT
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_choice, check_real
 
-__all__ = ["HybridFilter", "paper_posterior", "exact_posterior", "GaussianSumPosterior", "VARIANTS"]
+__all__ = [
+    "HybridFilter",
+    "paper_posterior",
+    "exact_posterior",
+    "GaussianSumPosterior",
+    "VARIANTS",
+    "GP_MODELS",
+]
 
 VARIANTS = ("exact", "paper")
+GP_MODELS = {"se": DGPT, "ncv": StateSpaceDGPT}
+"""The DGPT the filter wraps: the paper's SE model, or the NCV GP in state-space form."""
 REACQUIRE_RULES = ("dgpt", "none")
 """What the exact variant does at the first step with measurements after steps without any
 (a coverage gap): ``"dgpt"`` answers with the DGPT's own estimate, ``"none"`` applies the
@@ -179,7 +192,8 @@ class HybridFilter(TrackerBase):
     (eq. (48)); the step's measurements update it under the Poisson likelihood (eq. (42)),
     with the closed form of eqs. (50)-(51) (``variant="paper"``) or the exact posterior
     (``variant="exact"``). The posterior is the estimate, and it is fed back to the DGPT as
-    its estimate of the step (the spatial input of STGP). The first step, which has no prior,
+    its estimate of the step (the spatial input of STGP; with ``gp="ncv"``, the state the
+    tracker broadcasts and predicts from). The first step, which has no prior,
     returns the DGPT's estimate. The bound is Lemma 1 on the posterior,
     (2 log(1 / delta))^(1/2) sigma_t.
 
@@ -187,8 +201,9 @@ class HybridFilter(TrackerBase):
         variant: ``"exact"`` or ``"paper"``.
         delta: failure probability of the bound, in (0, 1).
         prune_tolerance: relative weight below which exact-posterior components are dropped.
-        **dgpt_kwargs: arguments of the wrapped :class:`~agents.dgpt.DGPT` (aggregation,
-            inputs, window, ...).
+        reacquire: what the exact variant does after a coverage gap (:data:`REACQUIRE_RULES`).
+        gp: the wrapped DGPT, ``"se"`` or ``"ncv"`` (:data:`GP_MODELS`).
+        **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window, ...).
     """
 
     name = "hybrid"
@@ -199,6 +214,7 @@ class HybridFilter(TrackerBase):
         delta: float = 0.003,
         prune_tolerance: float = 1e-9,
         reacquire: str = "dgpt",
+        gp: str = "se",
         **dgpt_kwargs,
     ) -> None:
         self.variant = check_choice("variant", variant, VARIANTS)
@@ -207,8 +223,10 @@ class HybridFilter(TrackerBase):
             "delta", delta, low=0.0, high=1.0, low_inclusive=False, high_inclusive=False
         )
         self.prune_tolerance = check_real("prune_tolerance", prune_tolerance, low=0.0, high=1.0)
-        self.dgpt = DGPT(delta=delta, **dgpt_kwargs)
-        self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{self.dgpt.inputs}"
+        self.gp = check_choice("gp", gp, GP_MODELS)
+        self.dgpt = GP_MODELS[self.gp](delta=delta, **dgpt_kwargs)
+        inputs = self.dgpt.inputs if self.gp == "se" else "ncv"
+        self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{inputs}"
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         if self.variant == "paper" and spec.detection_rate != 1.0:
@@ -230,14 +248,21 @@ class HybridFilter(TrackerBase):
     def update_batch(
         cls, trackers: Sequence[HybridFilter], observations: Sequence[dict]
     ) -> list[Estimate]:
-        """One step of many episodes in lockstep: the wrapped DGPTs step together
-        (:func:`agents.dgpt.update_batch`, exact per episode), then each episode's Poisson
+        """One step of many episodes in lockstep: the wrapped DGPTs of each kind step
+        together (their ``update_batch``, exact per episode), then each episode's Poisson
         update runs on its own."""
         for tracker in trackers:
             if tracker.spec_ is None:
                 raise RuntimeError("call reset(spec) before update(obs)")
         priors = [tracker.dgpt.prior_next_ for tracker in trackers]
-        learned = DGPT.update_batch([tracker.dgpt for tracker in trackers], observations)
+        learned: list[Estimate | None] = [None] * len(trackers)
+        for model in {type(tracker.dgpt) for tracker in trackers}:
+            indices = [i for i, tracker in enumerate(trackers) if type(tracker.dgpt) is model]
+            estimates = model.update_batch(
+                [trackers[i].dgpt for i in indices], [observations[i] for i in indices]
+            )
+            for i, estimate in zip(indices, estimates):
+                learned[i] = estimate
         return [
             tracker._posterior(obs, prior, estimate)
             for tracker, obs, prior, estimate in zip(trackers, observations, priors, learned)
@@ -266,6 +291,6 @@ class HybridFilter(TrackerBase):
             )
             mean, var = result.mean, result.var
             self.pruned_mass_ = max(self.pruned_mass_, result.pruned_mass)
-        prior_next = self.dgpt.set_estimate(mean)
+        prior_next = self.dgpt.set_estimate(mean, var)
         bound = np.sqrt(2.0 * np.log(1.0 / self.delta) * var)
         return Estimate(mean, var, bound, prior_next)

@@ -45,5 +45,6 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
     ),
     ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact"}),
     ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper"}),
+    ("hybrid-ncv", "agents.hybrid:HybridFilter", {"variant": "exact", "gp": "ncv"}),
 )
 """``(id, "module:Class", default keyword arguments)`` of every tracker in ``agents/``."""

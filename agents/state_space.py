@@ -50,6 +50,7 @@ __all__ = [
     "WindowStep",
     "Manoeuvre",
     "process_noise_components",
+    "condition_on_position",
     "filter_window",
     "filter_steps",
 ]
@@ -236,6 +237,27 @@ def process_noise_components(q: np.ndarray, manoeuvre: Manoeuvre | None):
     if manoeuvre is None:
         return [(q, 1.0)]
     return [(q, 1.0 - manoeuvre.probability), (q + manoeuvre.intensity, manoeuvre.probability)]
+
+
+def condition_on_position(mean, cov, position_mean, position_var):
+    """The state's posterior when a position posterior N(``position_mean``,
+    ``position_var``) (...,) replaces the prior's position marginal: the prior N(``mean``,
+    ``cov``) ((..., 2), (..., 2, 2)) keeps its velocity given the position, linear in it
+    with slope g = P_vp / P_pp. Exact for any update whose likelihood depends on the
+    position only (the hybrid filter's Poisson likelihood, eq. (42)), moment-matched when the
+    position posterior is not Gaussian; a Kalman update's own position marginal gives back
+    the Kalman update. Returns the mean (..., 2) and covariance (..., 2, 2)."""
+    position_mean = np.asarray(position_mean, dtype=float)
+    position_var = np.asarray(position_var, dtype=float)
+    slope = cov[..., 1, 0] / cov[..., 0, 0]
+    velocity = mean[..., 1] + slope * (position_mean - mean[..., 0])
+    cross = slope * position_var
+    velocity_var = cov[..., 1, 1] - slope * cov[..., 1, 0] + slope * cross
+    new_mean = np.stack([position_mean, velocity], axis=-1)
+    new_cov = np.stack(
+        [np.stack([position_var, cross], -1), np.stack([cross, velocity_var], -1)], -2
+    )
+    return new_mean, new_cov
 
 
 def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = None):

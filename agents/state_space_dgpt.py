@@ -70,6 +70,7 @@ from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
     WindowStep,
+    condition_on_position,
     expert_posteriors,
     filter_steps,
     filter_window,
@@ -195,7 +196,9 @@ class StateSpaceDGPT(TrackerBase):
         self.noise_var_ = spec.model_noise_std**2
         self.log_q_ = np.full(2, np.log(PROCESS_NOISE_START))
         self.screen_ = ClutterScreen(spec, self.admission_probability)
-        self.prediction_ = None  # (mean, var) (2,) of the position at the next step
+        self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
+        self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
+        self.prior_state_ = None  # the same, made at the last step for this one
         self.fits_ = 0
         self.fits_at_bound_ = 0
         self._start_track()
@@ -258,12 +261,13 @@ class StateSpaceDGPT(TrackerBase):
             raise RuntimeError("call reset(spec) before update(obs)")
         spec = self.spec_
         step = int(obs["t"])
+        self.prior_state_ = self.next_state_
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
         if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
             keep, started = self.screen_.screen(
-                points, sensors, self.prediction_, np.full(2, self.noise_var_), obs.get("awake")
+                points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
             )
             points, sensors = points[keep], sensors[keep]
             if started:
@@ -401,14 +405,33 @@ class StateSpaceDGPT(TrackerBase):
         """Broadcast the step's posterior and return the estimate with the next-step
         prediction (the mixture's, which the hybrid filter takes as its prior)."""
         self.mean_, self.cov_, self.last_step_ = mean, cov, step
+        prior_next = self._predict_next(mean, cov)
+        return Estimate(mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, prior_next)
+
+    def _predict_next(self, mean, cov) -> tuple[np.ndarray, np.ndarray]:
+        """The state's prediction one step ahead under the mixture's moments (q + p q_m);
+        kept in ``next_state_`` and, for the position, ``prior_next_``, which it returns."""
         q = np.exp(self.log_q_)
         if self.manoeuvre is not None:  # the moments of the two components' predictions
             q = q + self.manoeuvre.probability * self.manoeuvre.intensity
         next_mean, next_cov = ncv_predict(mean, cov, self.spec_.dt, q)
-        self.prediction_ = (next_mean[:, 0], next_cov[:, 0, 0])
-        return Estimate(
-            mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, (next_mean[:, 0], next_cov[:, 0, 0])
-        )
+        self.next_state_ = (next_mean, next_cov)
+        self.prior_next_ = (next_mean[:, 0], next_cov[:, 0, 0])
+        return self.prior_next_
+
+    def set_estimate(self, estimate, var) -> tuple[np.ndarray, np.ndarray]:
+        """Take the hybrid filter's posterior of this step's position, N(``estimate``,
+        ``var``) (2,) each, in place of the tracker's own: the broadcast state becomes this
+        step's prior conditioned on it (:func:`agents.state_space.condition_on_position`),
+        and so does the learning window's prior for the next step with data. Returns the
+        next-step prediction (mean, var) of the position."""
+        if self.prior_state_ is None:
+            raise RuntimeError("set_estimate needs a prior: call it after an update that had one")
+        mean, cov = condition_on_position(*self.prior_state_, estimate, var)
+        self.mean_, self.cov_ = mean, cov
+        if self.data_mean_ is not None and self.data_step_ == self.last_step_:
+            self.data_mean_, self.data_cov_ = mean, cov
+        return self._predict_next(mean, cov)
 
 
 def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:

@@ -127,10 +127,17 @@ def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
 
 def test_hybrid_filters_in_lockstep_equal_each_alone():
     """Both variants, TGP and STGP (whose next-step prediction is recomputed from the
-    posterior), stepped together: bit for bit the estimates of each episode alone."""
+    posterior), and the NCV hybrid (two kinds of wrapped tracker in one batch), stepped
+    together: bit for bit the estimates of each episode alone."""
     from dgpt_gym.benchmark.episodes import run_episodes
 
-    settings = [("hybrid", {}, 0), ("hybrid-paper", {}, 1), ("hybrid", {"inputs": "stgp"}, 2)]
+    settings = [
+        ("hybrid", {}, 0),
+        ("hybrid-paper", {}, 1),
+        ("hybrid", {"inputs": "stgp"}, 2),
+        ("hybrid-ncv", {}, 3),
+        ("hybrid-ncv", {}, 4),
+    ]
 
     def env():
         return gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
@@ -337,15 +344,16 @@ def test_the_likelihood_of_a_heavy_scan_is_summed_in_chunks(monkeypatch, rng):
     np.testing.assert_allclose(model.log_likelihood(positions, measurements), dense, rtol=1e-12)
 
 
+@pytest.mark.parametrize("tracker", ["hybrid", "hybrid-ncv"])
 @pytest.mark.parametrize("scenario", ["S1", "S4"])
-def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(scenario):
+def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(tracker, scenario):
     """Issue 12's calibration goals on steps where a sensor senses the target, sigma_z 1,
     clutter rate 1, six training-seed episodes (n of about 750 sensed steps): the 3-sigma
     interval covers each axis at least 99 % less three binomial standard errors
     (3 sqrt(0.99 x 0.01 / n), about 1.1 points), and the median 2-D NEES lies in [0.7, 2.8]
     (nominal 1.39; its sampling standard error here is about 0.07). A variance 10 times too
     wide gives a median NEES near 0.1, 10 times too narrow near 10: either fails."""
-    coverage, median_nees, n = sensed_calibration("hybrid", scenario, range(1000, 1006))
+    coverage, median_nees, n = sensed_calibration(tracker, scenario, range(1000, 1006))
     assert n > 600
     assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
     assert 0.7 <= median_nees <= 2.8, median_nees

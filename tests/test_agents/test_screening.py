@@ -204,7 +204,7 @@ def admitted_sensors(tracker):
 
 def predicted_var(tracker):
     """The tracker's predicted position variance (2,) for its next step."""
-    return tracker.prior_next_[1] if isinstance(tracker, DGPT) else tracker.prediction_[1]
+    return tracker.prior_next_[1]
 
 
 PAIR = np.array([[500.0, 500.0], [500.5, 500.0]])

@@ -22,6 +22,7 @@ from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
     WindowStep,
+    condition_on_position,
     expert_posteriors,
     filter_steps,
     filter_window,
@@ -100,6 +101,23 @@ def test_fused_update_is_the_aggregation_of_the_experts_local_posteriors(method,
         one_mean, one_cov = dense_aggregate(method, mean, cov, [z], [r])
         np.testing.assert_allclose(m, one_mean, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(c, one_cov, rtol=1e-9, atol=1e-9)
+
+
+@given(seed=seeds, noise_var=st.floats(0.01, 100.0))
+@settings(max_examples=30, deadline=None)
+def test_conditioning_on_a_kalman_updates_position_gives_back_the_kalman_update(seed, noise_var):
+    """A position posterior from a Gaussian measurement, put in place of the prior's position
+    marginal, gives the whole Kalman posterior: the velocity follows through the prior's
+    correlation, as it does in the Kalman gain (three states at once, both orders of size)."""
+    rng = np.random.default_rng(seed)
+    mean, cov = random_state(rng, (3,))
+    summary = mean[:, 0] + rng.normal(0.0, 5.0, 3)
+    expected_mean, expected_cov = expert_posteriors(mean, cov, summary[:, None], noise_var)
+    got_mean, got_cov = condition_on_position(
+        mean, cov, expected_mean[:, 0, 0], expected_cov[:, 0, 0, 0]
+    )
+    np.testing.assert_allclose(got_mean, expected_mean[:, 0], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got_cov, expected_cov[:, 0], rtol=1e-9, atol=1e-9)
 
 
 @given(seed=seeds, n_experts=st.integers(1, 6))
@@ -488,6 +506,30 @@ def test_windows_learnt_together_climb_as_each_window_filtered_alone():
         )
         np.testing.assert_allclose(climbed[id(tracker)], expected, rtol=1e-12)
     assert len({round(float(climbed[id(t)][0, 0]), 6) for t in trackers}) == 3
+
+
+def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
+    """Without the manoeuvre component a step's posterior is a Kalman update of the prior
+    the tracker predicted for it, so feeding its own position posterior back through
+    ``set_estimate`` (as the hybrid filter feeds its own) must leave the broadcast state and
+    the next prediction as they were: the prior it conditions is the step's own."""
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    obs, info = env.reset(seed=1000)
+    tracker = StateSpaceDGPT(manoeuvre_intensity=0.0)
+    tracker.reset(info["problem_spec"])
+    checked = 0
+    for step in range(40):
+        estimate = tracker.update(obs)
+        if tracker.prior_state_ is not None and tracker.data_step_ == step:
+            mean, cov, prior_next = tracker.mean_, tracker.cov_, tracker.prior_next_
+            returned = tracker.set_estimate(estimate.mean, estimate.var)
+            np.testing.assert_allclose(tracker.mean_, mean, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(tracker.cov_, cov, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(returned, prior_next, rtol=1e-9, atol=1e-9)
+            np.testing.assert_array_equal(tracker.data_mean_, tracker.mean_)
+            checked += 1
+        obs, *_ = env.step(estimate.mean)
+    assert checked >= 20
 
 
 @pytest.mark.parametrize(
