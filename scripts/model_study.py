@@ -2,7 +2,8 @@
 ``--first-seed 0``, to report a setting already chosen).
 
 Every candidate runs on S1-S4, the reference and random paths, clutter rates 1 and 5,
-sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RMSE (m), NRMSE
+sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RMSE (m; then
+on the steps where a sensor senses the target and on the coverage-gap steps), NRMSE
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
 (nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), the median
 step time, and the share of fitted steps that left a hyperparameter on a bound (%, where
@@ -36,6 +37,8 @@ CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp": ("baselines.standard_gp:StandardGP", {"window": 3}),
     "hybrid": ("agents.hybrid:HybridFilter", {"window": 3}),
+    "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
+    "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     # references, not GP models: the accuracy floor and the strongest standard tracker
     "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),
     "imm-pda": ("baselines.pda:IMMPDAFilter", {}),
@@ -180,7 +183,10 @@ def main(argv=None) -> int:
     def mean(rows, key):
         return float(np.nanmean([row[key] for row in rows]))
 
-    print("candidate        cell                rmse_2d  nrmse%  nees_med_det  cov3_det%  ms  bound%")
+    print(
+        "candidate        cell                rmse_2d  det  gap  nrmse%  nees_med_det  cov3_det%"
+        "  ms  bound%"
+    )
     totals = collections.defaultdict(list)
     for (name, scenario, trajectory, clutter), rows in by_cell.items():
         nrmse = 50 * (mean(rows, "nrmse_x") + mean(rows, "nrmse_y"))
@@ -191,8 +197,10 @@ def main(argv=None) -> int:
         rmse = mean(rows, "rmse_2d")
         at_bound = 100 * mean(rows, "share_at_bound") if "share_at_bound" in rows[0] else np.nan
         cell = f"{scenario} {trajectory:6s} c{clutter:g}"
+        detected, gap = mean(rows, "rmse_2d_detected"), mean(rows, "rmse_2d_gap")
         print(
-            f"{name:16s} {cell:18s} {rmse:8.2f} {nrmse:7.2f} {nees:12.3f} {coverage:9.2f}"
+            f"{name:16s} {cell:18s} {rmse:8.2f} {detected:4.1f} {gap:4.1f} {nrmse:7.2f}"
+            f" {nees:12.3f} {coverage:9.2f}"
             f" {float(np.median([row['step_time_ms'] for row in rows])):5.2f} {at_bound:6.1f}"
         )
         totals[name].append((trajectory, rmse, nrmse, nees, coverage, at_bound))

@@ -32,7 +32,7 @@ FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
     ("clairvoyant", "imm-pda", "pda")
     + PAPER_GP_TRACKERS
-    + ("dgpt-bcm-ncv", "hybrid", "hybrid-paper", "cpf")
+    + ("dgpt-bcm-ncv", "hybrid", "hybrid-paper", "hybrid-ncv", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
 

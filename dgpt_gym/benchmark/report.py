@@ -227,7 +227,15 @@ def windows_markdown() -> list[str]:
     return lines + [""]
 
 
-HYBRID_COMPARISON_TRACKERS = ("gp", "dgpt-rbcm", "hybrid", "hybrid-paper", "cpf")
+HYBRID_COMPARISON_TRACKERS = (
+    "gp",
+    "dgpt-rbcm",
+    "hybrid",
+    "hybrid-paper",
+    "dgpt-bcm-ncv",
+    "hybrid-ncv",
+    "cpf",
+)
 
 
 def _comparison_layout(rows: list[dict]):

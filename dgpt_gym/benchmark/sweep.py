@@ -166,7 +166,7 @@ PAPER_SWEEP = (
     ),
     Grid(trackers=PAPER_AS_PRINTED_TRACKERS, noise_levels=(1.0,), runs=100),
     Grid(
-        trackers=("hybrid", "hybrid-paper", "cpf"),
+        trackers=("hybrid", "hybrid-paper", "hybrid-ncv", "cpf"),
         noise_levels=(1.0,),
         clutter_rates=(1.0, 5.0),
         runs=100,
@@ -176,7 +176,8 @@ PAPER_SWEEP = (
 the NCV GP in state-space form (``dgpt-bcm-ncv``), the standard trackers and the clairvoyant
 floor on every cell; the paper's model as
 printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter in
-both variants and the CPF at sigma_z = 1 and both clutter rates (Fig. 8 is the clutter-5
+both variants, the hybrid around ``dgpt-bcm-ncv`` and the CPF at sigma_z = 1 and both clutter
+rates (Fig. 8 is the clutter-5
 cell); 100 Monte Carlo runs each."""
 
 
