@@ -39,6 +39,19 @@ CANDIDATES = {
     "hybrid": ("agents.hybrid:HybridFilter", {"window": 3}),
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
+    "hybrid-ncv-per-sensor": (
+        "agents.hybrid:HybridFilter",
+        {"gp": "ncv", "scan_model": "per-sensor"},
+    ),
+    "hybrid-per-sensor": ("agents.hybrid:HybridFilter", {"window": 3, "scan_model": "per-sensor"}),
+    "hybrid-ncv-per-sensor-reacquire-none": (
+        "agents.hybrid:HybridFilter",
+        {"gp": "ncv", "scan_model": "per-sensor", "reacquire": "none"},
+    ),
+    "hybrid-per-sensor-reacquire-none": (
+        "agents.hybrid:HybridFilter",
+        {"window": 3, "scan_model": "per-sensor", "reacquire": "none"},
+    ),
     # references, not GP models: the accuracy floor and the strongest standard tracker
     "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),
     "imm-pda": ("baselines.pda:IMMPDAFilter", {}),

@@ -84,6 +84,60 @@ def test_exact_variant_equals_grid_integration():
     assert result.pruned_mass < 1e-6
 
 
+def per_sensor_log_likelihood(grid, measurements, sensors, model=LIKELIHOOD):
+    """log prod_i [prod_(j in i) (c + lambda_T N(z_j; x)) - c^(n_i)] on grid points (g, 2),
+    written out directly: each reporting sensor has at least one target point."""
+    c = model.clutter_rate / model.sensing_area
+    total = np.zeros(grid.shape[0])
+    for sensor in np.unique(sensors):
+        own = measurements[sensors == sensor]
+        product = np.ones(grid.shape[0])
+        for z in own:
+            density = np.exp(-0.5 * np.sum((grid - z) ** 2, axis=1) / model.noise_std**2) / (
+                2 * np.pi * model.noise_std**2
+            )
+            product *= c + model.detection_rate * density
+        with np.errstate(divide="ignore"):  # 0 where no point of the sensor is near x
+            total += np.log(product - c ** len(own))
+    return total
+
+
+def test_per_sensor_exact_posterior_equals_grid_integration():
+    """With the reporting sensors given, the Gaussian sum keeps only the subsets with a
+    target point from every sensor: its moments match a grid integration of that likelihood
+    (sensor 0 reports two points, 1 and 2 one each), and differ from eq. (42)'s."""
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 2.25])
+    measurements = np.array([[1.0, 0.5], [-3.0, 2.5], [0.6, -0.2], [4.0, -1.0]])
+    sensors = np.array([0, 0, 1, 2])
+    result = exact_posterior(prior_mean, prior_var, measurements, LIKELIHOOD, sensors=sensors)
+    axis = np.arange(-12.0, 12.0, 0.02)
+    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), -1).reshape(-1, 2)
+    log_density = per_sensor_log_likelihood(grid, measurements, sensors) - 0.5 * np.sum(
+        (grid - prior_mean) ** 2 / prior_var, axis=1
+    )
+    weights = np.exp(log_density - log_density.max())
+    weights /= weights.sum()
+    mean = weights @ grid
+    np.testing.assert_allclose(result.mean, mean, atol=1e-4)
+    np.testing.assert_allclose(result.var, weights @ (grid - mean) ** 2, rtol=1e-3)
+    assert result.pruned_mass < 1e-6
+    eq42 = exact_posterior(prior_mean, prior_var, measurements, LIKELIHOOD)
+    assert np.max(np.abs(eq42.mean - result.mean)) > 0.05
+
+
+def test_a_sensors_only_point_is_its_target_point_however_far():
+    """A sensor that reports one point 20 m from a prior of variance 4 and 2.25 senses the
+    target, so that point is the target's: the posterior is the Kalman update with it
+    (x: 4 / 5 of 20 = 16, variance 4 / 5; y: 0 and 2.25 / 3.25), although eq. (42)'s
+    pre-gate discards it as clutter and leaves the prior."""
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 2.25])
+    far = np.array([[20.0, 0.0]])
+    result = exact_posterior(prior_mean, prior_var, far, LIKELIHOOD, sensors=np.array([7]))
+    np.testing.assert_allclose(result.mean, [16.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(result.var, [0.8, 2.25 / 3.25], rtol=1e-12)
+    np.testing.assert_allclose(exact_posterior(prior_mean, prior_var, far, LIKELIHOOD).mean, 0.0)
+
+
 def test_far_clutter_moves_the_exact_posterior_far_less_than_the_paper_variant():
     prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 4.0])
     target = np.array([[0.5, 0.2], [-0.3, 0.4]])
@@ -290,20 +344,33 @@ def test_paper_hybrid_warns_that_it_assumes_unit_detection_rate():
 
 
 class PriorRecordingHybrid(HybridFilter):
-    """Records the prior and the measurements of every step's Poisson update."""
+    """Records the prior, the measurements and their sensors of every step's Poisson update."""
 
     def _posterior(self, obs, prior, learned):
         mask = np.asarray(obs["mask"]).astype(bool)
-        self.seen_.append((prior, np.asarray(obs["measurements"])[mask].copy(), self.silent_steps_))
+        self.seen_.append(
+            (
+                prior,
+                np.asarray(obs["measurements"])[mask].copy(),
+                np.asarray(obs["sensor"])[mask].copy(),
+                self.silent_steps_,
+            )
+        )
         return super()._posterior(obs, prior, learned)
 
 
-def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound():
-    """At every step after the first (and not re-acquiring after a gap), the exact hybrid's
-    estimate is the posterior of the DGPT's prior under eq. (42) (computed here directly),
-    and its bound is Lemma 1's (2 log(1 / delta))^(1/2) sigma on that posterior."""
+@pytest.mark.parametrize(
+    "scan_model, reacquire", [("eq42", "dgpt"), ("per-sensor", "none"), ("per-sensor", "dgpt")]
+)
+def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound(scan_model, reacquire):
+    """At every step after the first (and, with reacquire="dgpt", not re-acquiring after a
+    gap), the exact hybrid's estimate is the posterior of the DGPT's prior under eq. (42) or
+    the per-sensor model (computed here directly), and its bound is Lemma 1's
+    (2 log(1 / delta))^(1/2) sigma on that posterior."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
-    tracker = PriorRecordingHybrid(window=3, delta=0.003)
+    tracker = PriorRecordingHybrid(
+        window=3, delta=0.003, scan_model=scan_model, reacquire=reacquire
+    )
     tracker.seen_ = []
     obs, info = env.reset(seed=2)
     tracker.reset(info["problem_spec"], seed=2)
@@ -311,9 +378,16 @@ def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound():
     moved = 0
     for _ in range(60):
         estimate = tracker.update(obs)
-        prior, measurements, silent_before = tracker.seen_[-1]
-        if prior is not None and not (silent_before and len(measurements)):
-            expected = exact_posterior(prior[0], prior[1], measurements, likelihood)
+        prior, measurements, sensors, silent_before = tracker.seen_[-1]
+        reacquiring = reacquire == "dgpt" and silent_before and len(measurements)
+        if prior is not None and not reacquiring:
+            expected = exact_posterior(
+                prior[0],
+                prior[1],
+                measurements,
+                likelihood,
+                sensors=sensors if scan_model == "per-sensor" else None,
+            )
             np.testing.assert_array_equal(estimate.mean, expected.mean)
             np.testing.assert_array_equal(estimate.var, expected.var)
             # Lemma 1 with delta = 0.003: 2 log(1 / 0.003) = 11.62
