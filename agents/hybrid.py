@@ -243,7 +243,9 @@ class HybridFilter(TrackerBase):
         prune_tolerance: relative weight below which exact-posterior components are dropped.
         reacquire: what the exact variant does after a coverage gap (:data:`REACQUIRE_RULES`).
         gp: the wrapped DGPT, ``"se"`` or ``"ncv"`` (:data:`GP_MODELS`).
-        scan_model: the exact variant's measurement model (:data:`SCAN_MODELS`).
+        scan_model: the exact variant's measurement model (:data:`SCAN_MODELS`); with
+            ``clutter_sensors="all"`` a reporting sensor need not sense the target, and eq.
+            (42) is used.
         **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window, ...).
     """
 
@@ -329,7 +331,9 @@ class HybridFilter(TrackerBase):
         if self.variant == "paper":
             mean, var = paper_posterior(prior[0], prior[1], measurements, self.likelihood_)
         else:
-            sensors = np.asarray(obs["sensor"])[mask] if self.scan_model == "per-sensor" else None
+            # with clutter at every sensor a reporting sensor need not sense the target
+            per_sensor = self.scan_model == "per-sensor" and self.spec_.clutter_sensors != "all"
+            sensors = np.asarray(obs["sensor"])[mask] if per_sensor else None
             result = exact_posterior(
                 prior[0],
                 prior[1],

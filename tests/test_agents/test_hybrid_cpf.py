@@ -432,3 +432,13 @@ def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(tracker, scenario):
     assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
     assert 0.7 <= median_nees <= 2.8, median_nees
 
+
+
+def test_with_clutter_at_every_sensor_the_hybrid_falls_back_to_eq_42():
+    """With clutter_sensors="all" a reporting sensor need not sense the target, so the
+    per-sensor model's premise fails and the exact hybrid must use eq. (42): its estimates
+    equal those of scan_model="eq42" (which would differ under the per-sensor model)."""
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0, clutter_sensors="all")
+    default = run_episode(env, HybridFilter(window=3), 1000)
+    eq42 = run_episode(env, HybridFilter(window=3, scan_model="eq42", reacquire="none"), 1000)
+    np.testing.assert_array_equal(default.mean, eq42.mean)
