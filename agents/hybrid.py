@@ -195,9 +195,14 @@ def exact_posterior(
         weights = np.zeros(log_weights.size)
         weights[valid] = np.exp(log_weights[valid])
         total = weights.sum()
-        keep = valid & (weights >= prune_tolerance * total)
+        # Within a sensor, the components with none of its points as the target's yet are
+        # kept whatever their weight (they branch into its later points) and are not the
+        # reference of the pruning: they are dropped at its last point.
+        pending = np.zeros(valid.size, dtype=bool) if sensors is None else valid & ~has_target
+        reference = total if not np.any(valid & ~pending) else weights[valid & ~pending].sum()
+        keep = valid & ((weights >= prune_tolerance * reference) | pending)
         if keep.sum() > max_components:
-            keep &= weights >= np.sort(weights)[-max_components]
+            keep &= (weights >= np.sort(weights[keep])[-max_components]) | pending
         pruned_now = weights[valid & ~keep].sum() / total
         pruned = pruned + (1.0 - pruned) * pruned_now
         means, variances, log_weights = means[keep], variances[keep], log_weights[keep]

@@ -442,3 +442,15 @@ def test_with_clutter_at_every_sensor_the_hybrid_falls_back_to_eq_42():
     default = run_episode(env, HybridFilter(window=3), 1000)
     eq42 = run_episode(env, HybridFilter(window=3, scan_model="eq42", reacquire="none"), 1000)
     np.testing.assert_array_equal(default.mean, eq42.mean)
+
+
+def test_pruning_keeps_a_sensors_target_point_that_the_all_clutter_branch_outweighs():
+    """A sensor reports two points far from the prior, 20 and 26 m away. Its target point is
+    almost surely the nearer (weight ratio e^27.6), so the posterior is the Kalman update
+    with it (x: 16). Until the sensor's last point, the branch in which all its points are
+    clutter outweighs every target branch by far more than the pruning tolerance; pruned
+    against it, the nearer point's branch would be lost and the last point taken instead."""
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 2.25])
+    points = np.array([[20.0, 0.0], [26.0, 0.0]])
+    result = exact_posterior(prior_mean, prior_var, points, LIKELIHOOD, sensors=np.array([7, 7]))
+    np.testing.assert_allclose(result.mean, [16.0, 0.0], atol=1e-6)
