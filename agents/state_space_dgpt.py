@@ -249,12 +249,12 @@ class StateSpaceDGPT(TrackerBase):
         for group in groups.values():
             _learn_pooled(group)
         return [
-            tracker._finish(step) if step is not None else tracker.last_estimate_
+            tracker._keep(*step) if step is not None else tracker.last_estimate_
             for tracker, step in zip(trackers, pending)
         ]
 
     def _observe(self, obs: dict):
-        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb)`` for :meth:`_finish` after
+        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb)`` for :meth:`_keep` after
         the learning, or None when the step is finished (no data; its estimate is in
         ``last_estimate_``)."""
         if getattr(self, "spec_", None) is None:
@@ -330,10 +330,6 @@ class StateSpaceDGPT(TrackerBase):
         ucb = np.max([h["ucb"] + np.abs(h["mean"][:, 0] - mean[:, 0]) for h in hypotheses], axis=0)
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
         return step, mean, cov, ucb
-
-    def _finish(self, pending) -> Estimate:
-        """Broadcast the posterior of a step with data, after the learning (step 5)."""
-        return self._keep(*pending)
 
     def _ready_to_learn(self) -> bool:
         """Whether the window holds the three summaries a Newton step needs."""

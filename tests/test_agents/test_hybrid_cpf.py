@@ -7,6 +7,7 @@ from conftest import problem_spec, sensed_calibration
 
 from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
 from agents.likelihood import PoissonLikelihood
+from agents.state_space import condition_on_position, ncv_predict
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.episodes import run_episode
@@ -454,3 +455,32 @@ def test_pruning_keeps_a_sensors_target_point_that_the_all_clutter_branch_outwei
     points = np.array([[20.0, 0.0], [26.0, 0.0]])
     result = exact_posterior(prior_mean, prior_var, points, LIKELIHOOD, sensors=np.array([7, 7]))
     np.testing.assert_allclose(result.mean, [16.0, 0.0], atol=1e-6)
+
+
+def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
+    """After every step whose Poisson update ran, the wrapped NCV tracker's broadcast state
+    is the prior state it predicted for the step conditioned on the hybrid's posterior
+    position, mean and variance (condition_on_position); and its next prediction is made
+    from that state."""
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    tracker = HybridFilter(gp="ncv")
+    obs, info = env.reset(seed=1000)
+    tracker.reset(info["problem_spec"], seed=1000)
+    checked = 0
+    for _ in range(60):
+        prior_state = tracker.dgpt.next_state_
+        estimate = tracker.update(obs)
+        if prior_state is not None and np.any(obs["mask"]):
+            mean, cov = condition_on_position(*prior_state, estimate.mean, estimate.var)
+            np.testing.assert_allclose(tracker.dgpt.mean_, mean, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(tracker.dgpt.cov_, cov, rtol=1e-12, atol=1e-12)
+            manoeuvre = tracker.dgpt.manoeuvre
+            q = np.exp(tracker.dgpt.log_q_) + manoeuvre.probability * manoeuvre.intensity
+            next_mean, next_cov = ncv_predict(
+                tracker.dgpt.mean_, tracker.dgpt.cov_, info["problem_spec"].dt, q
+            )
+            np.testing.assert_array_equal(estimate.prior_next[0], next_mean[:, 0])
+            np.testing.assert_array_equal(estimate.prior_next[1], next_cov[:, 0, 0])
+            checked += 1
+        obs, *_ = env.step(estimate.mean)
+    assert checked >= 40
