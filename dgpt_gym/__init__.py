@@ -49,4 +49,5 @@ for _environment in load_table(RL_ENVIRONMENT_TABLE):
             id=_environment.id,
             entry_point=_environment.entry_point,
             vector_entry_point=_environment.vector_entry_point,
+            kwargs=dict(_environment.kwargs),
         )

@@ -5,7 +5,7 @@ run on the evaluation seeds of the environment it was trained on; what it set ea
 (the environment's knob: window C, gate threshold or sensors woken) is tabulated by what the
 observation says:
 
-- ``DGPTrackSensors-v1``: the prediction's larger standard deviation (below 10 m, 10-30 m,
+- ``DGPTrackSensors-v1`` / ``-v2``: the prediction's larger standard deviation (below 10 m, 10-30 m,
   above 30 m) while sensors report, and the steps after a step without any report;
 - ``DGPTrackWindow-v0`` / ``DGPTrackGating-v0``: after a step without measurements; a
   surprise (the gated summaries lie more than 10 m, a fifth of the sensing range, from
@@ -81,7 +81,10 @@ def main(argv=None) -> int:
         policy = ModelPolicy(model, config["normalizer"])
         env = gym.make(config["env"], **config["env_kwargs"])
         situations = (
-            SENSOR_SITUATIONS if config["env"] == "DGPTrackSensors-v1" else TUNING_SITUATIONS
+            SENSOR_SITUATIONS
+            if config["env"].startswith("DGPTrackSensors-v")
+            and config["env"] != "DGPTrackSensors-v0"
+            else TUNING_SITUATIONS
         )
         classify = sensor_situation if situations is SENSOR_SITUATIONS else tuning_situation
         for seed in range(args.seeds):

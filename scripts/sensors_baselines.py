@@ -1,18 +1,19 @@
-"""The baselines of DGPTrackSensors-v1 on held-out seeds and layouts, with IQM intervals.
+"""The baselines of DGPTrackSensors-v1 / -v2 on held-out seeds and layouts, with IQM intervals.
 
 1. Tunes the adaptive rules of ``agents/rl/heuristics.py`` on training seeds (1000 onwards,
    random paths in layouts drawn from those seeds): the setting with the best mean return.
 2. Runs every policy on the evaluation seeds 0..N-1 (paths and layouts no training episode
    used): waking the nearest n for every n, waking all, a random policy, the tuned rules.
-3. Writes docs/rl_sensors_v1.md (interquartile mean of the return with a 95 % bootstrap
+3. Writes docs/rl_sensors_v1.md or docs/rl_sensors_v2.md (interquartile mean of the return with a 95 % bootstrap
    interval, mean NRMSE, sensors woken per step, and the paired difference to the best
    rule seed by seed; with agents, also their paired differences to every tuned rule) and
-   docs/figures/rl_sensors_v1_pareto.png (sensors woken per step
+   docs/figures/rl_sensors_v1_pareto.png (or ..._v2_...; sensors woken per step
    against the mean error, every policy).
 
     python scripts/sensors_baselines.py                      # S1, clutter 5, 100 seeds
     python scripts/sensors_baselines.py --seeds 20 --training-seeds 10
     python scripts/sensors_baselines.py --models models/sensors-v1-ppo-seed*   # with agents
+    python scripts/sensors_baselines.py --env DGPTrackSensors-v2 --models models/sensors-v2-ppo-seed*
 
 ``--models``: folders written by ``scripts/train_rl.py`` (model.zip, config.json,
 vecnormalize.pkl); each agent is evaluated without training, and the agents together are
@@ -55,7 +56,7 @@ from agents.rl.heuristics import (  # noqa: E402
 )
 from agents.rl.training import load_agent  # noqa: E402
 
-ENV_ID = "DGPTrackSensors-v1"
+ENV_IDS = ("DGPTrackSensors-v1", "DGPTrackSensors-v2")
 RULES = {"uncertainty radius": UncertaintyRadiusPolicy, "silence search": SilenceSearchPolicy}
 
 
@@ -72,8 +73,8 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int):
 
 def run_block(task):
     """Episodes of one policy on some seeds (a worker's unit)."""
-    kind, setting, env_kwargs, seeds = task
-    env = gym.make(ENV_ID, **env_kwargs)
+    kind, setting, env_id, env_kwargs, seeds = task
+    env = gym.make(env_id, **env_kwargs)
     rows = []
     agent = make_policy(kind, setting, env, seeds[0]) if kind == "agent" else None
     for seed in seeds:
@@ -156,6 +157,7 @@ def _against_each_rule(by_name: dict, agents: list[str], rules: list[str]) -> li
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS, help="the task")
     parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
     parser.add_argument("--training-seeds", type=int, default=20, help="seeds 1000..")
     parser.add_argument("--scenario", default="S1")
@@ -167,13 +169,14 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
-    env = gym.make(ENV_ID, **env_kwargs)
+    env = gym.make(args.env, **env_kwargs)
+    version = args.env.rsplit("-", 1)[1]
     constants, _ = env.unwrapped.fixed_actions()
 
     # 1. the rules' settings on training seeds
     training = list(range(1000, 1000 + args.training_seeds))
     tuning = [(kind, setting) for kind, grid in HEURISTIC_GRIDS.items() for setting in grid]
-    results = run_all([(k, s, env_kwargs, training) for k, s in tuning], args.workers)
+    results = run_all([(k, s, args.env, env_kwargs, training) for k, s in tuning], args.workers)
     best = {}
     for (kind, setting), rows in zip(tuning, results):
         score = float(np.mean([row["return"] for row in rows]))
@@ -192,20 +195,23 @@ def main(argv=None) -> int:
         training_score[f"{kind} ({label})"] = score
     for folder in args.models:
         config = json.loads((folder / "config.json").read_text())
-        if config["env"] != ENV_ID or config["env_kwargs"] != env_kwargs:
+        if config["env"] != args.env or config["env_kwargs"] != env_kwargs:
             parser.error(f"{folder} was trained on {config['env']} {config['env_kwargs']}")
         policies[f"agent {folder.name}"] = ("agent", folder)
     names = list(policies)
-    results = run_all([(*policies[name], env_kwargs, evaluation) for name in names], args.workers)
+    results = run_all(
+        [(*policies[name], args.env, env_kwargs, evaluation) for name in names], args.workers
+    )
     by_name = dict(zip(names, results))
     agents = [name for name in names if policies[name][0] == "agent"]
     best_rule = max(training_score, key=training_score.get)  # chosen on training seeds
 
     # 3. the table and the figure
     lines = [
-        f"# DGPTrackSensors-v1 baselines ({args.scenario}, clutter rate {args.clutter_rate:g})",
+        f"# {args.env} baselines ({args.scenario}, clutter rate {args.clutter_rate:g})",
         "",
         "Generated by `python scripts/sensors_baselines.py"
+        + (f" --env {args.env}" if args.env != ENV_IDS[0] else "")
         + (f" --seeds {args.seeds}" if args.seeds != 100 else "")
         + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
         + (" --models " + " ".join(str(path) for path in args.models) if args.models else "")
@@ -245,7 +251,8 @@ def main(argv=None) -> int:
         )
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "rl_sensors_v1.md").write_text(text)
+    table = args.out / f"rl_sensors_{version}.md"
+    table.write_text(text)
     print(text)
 
     import matplotlib
@@ -272,15 +279,14 @@ def main(argv=None) -> int:
     axis.set_xlabel("sensors woken per step")
     axis.set_ylabel("mean error, m")
     axis.set_title(
-        f"DGPTrackSensors-v1, {args.scenario}, clutter {args.clutter_rate:g}, "
-        f"seeds 0-{args.seeds - 1}"
+        f"{args.env}, {args.scenario}, clutter {args.clutter_rate:g}, seeds 0-{args.seeds - 1}"
     )
     axis.grid(alpha=0.3)
     figure.tight_layout()
-    path = args.out / "figures" / "rl_sensors_v1_pareto.png"
+    path = args.out / "figures" / f"rl_sensors_{version}_pareto.png"
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
-    print(f"wrote {args.out / 'rl_sensors_v1.md'} and {path}")
+    print(f"wrote {table} and {path}")
     return 0
 
 

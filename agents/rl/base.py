@@ -1,4 +1,4 @@
-"""What every RL environment of :mod:`agents.rl` shares: a ``DGPTrack-v0`` inside, a DGPT
+"""What every RL environment of :mod:`agents.rl` shares: a ``DGPTrack-v0`` inside, a GP
 tracker that processes its measurements, and the scoring of the tracker's estimate."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import abc
 
 import gymnasium as gym
 
-from agents.dgpt import DGPT
 from dgpt_gym.env import DGPTrackEnv
+from dgpt_gym.tracker import TrackerBase
 from dgpt_gym.validation import check_real
 
 __all__ = ["TrackerInsideEnv"]
@@ -21,7 +21,7 @@ class TrackerInsideEnv(gym.Env, abc.ABC):
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 
-    def __init__(self, tracker: DGPT, error_scale: float | None, env_kwargs: dict) -> None:
+    def __init__(self, tracker: TrackerBase, error_scale: float | None, env_kwargs: dict) -> None:
         self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
         self.render_mode = self.inner.render_mode
         self.tracker = tracker

@@ -61,7 +61,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--algo",
         default="ppo",
         choices=["ppo", "a2c", "dqn"],
-        help="algorithm (default: ppo; dqn needs a discrete action space: window, sensors-v1)",
+        help="algorithm (default: ppo; dqn needs a discrete action space: window, sensors-v1, sensors-v2)",
     )
     parser.add_argument(
         "--timesteps", type=int, default=20_000, help="training steps (default: 20000)"
@@ -150,4 +150,3 @@ def main(argv: list[str] | None = None) -> int:
     print(table)
     print(f"wrote {agent.model_path}, {out / 'comparison.md'} and {figure}")
     return 0
-

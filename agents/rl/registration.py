@@ -13,13 +13,16 @@ class RLEnvironment(NamedTuple):
     """An RL environment: its Gymnasium id and entry point, its short name for
     ``dgpt-train-rl --env``, what its comparison table averages per step, and the creator of
     its batched vector environment (``gymnasium.make_vec(id, num_envs,
-    vectorization_mode="vector_entry_point")``, :mod:`agents.rl.vector`)."""
+    vectorization_mode="vector_entry_point")``, :mod:`agents.rl.vector`) and the keyword
+    arguments the id fixes (Gymnasium passes them to both entry points; a user's own
+    override them)."""
 
     id: str
     entry_point: str
     alias: str
     per_step: str
     vector_entry_point: str
+    kwargs: tuple[tuple[str, object], ...] = ()
 
 
 ENVIRONMENTS: tuple[RLEnvironment, ...] = (
@@ -50,6 +53,14 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         "sensors-v1",
         "sensors woken per step",
         "agents.rl.vector:sensors_v1_vector_env",
+    ),
+    RLEnvironment(
+        "DGPTrackSensors-v2",
+        "agents.rl.sensors_v1:DGPTrackSensorsV1Env",
+        "sensors-v2",
+        "sensors woken per step",
+        "agents.rl.vector:sensors_v1_vector_env",
+        (("tracker", "dgpt-bcm-ncv"), ("window", 20)),
     ),
 )
 """Every RL environment in ``agents/rl/``."""

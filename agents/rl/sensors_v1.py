@@ -1,14 +1,14 @@
-"""Sensor management that a learned agent can win: ``DGPTrackSensors-v1``."""
+"""Sensor management that a learned agent can win: ``DGPTrackSensors-v1`` and ``-v2``."""
 
 from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
 
-from agents.dgpt import DGPT
 from agents.rl.base import TrackerInsideEnv
 from agents.rl.sensors_env import filter_reports
-from dgpt_gym.validation import check_real
+from dgpt_gym.registry import make_tracker, tracker_ids
+from dgpt_gym.validation import check_choice, check_integer, check_real
 
 __all__ = ["DGPTrackSensorsV1Env", "WAKE_COUNTS", "OBSERVED_CANDIDATES", "TOP_SPEED"]
 
@@ -28,7 +28,9 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
 
     ## Description
 
-    ``DGPTrack-v0`` with a DGPT tracker inside, on a random path through a random sensor
+    ``DGPTrack-v0`` with a GP tracker inside (v1: the SE DGPT-RBCM; ``DGPTrackSensors-v2``:
+    ``dgpt-bcm-ncv``, the distributed NCV GP, whose predictive standard deviation, which the
+    observation carries, is calibrated), on a random path through a random sensor
     layout each episode (the layout is drawn from the episode's seed, so evaluation seeds
     0-99 meet layouts that training seeds 1000 and up never showed). Before each step the
     agent chooses how many of the charged sensors nearest the tracker's predicted position
@@ -91,7 +93,8 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``energy_weight`` | 2.0 | reward per unit of battery spent |
     | ``error_cap`` | 4 x sensing range | m, the largest error the reward counts |
     | ``error_scale`` | sensing range | metres per unit of error penalty |
-    | ``window`` | 3 | the DGPT tracker's window length |
+    | ``tracker`` | ``"dgpt-rbcm"`` | the registered id of the tracker inside (``dgpt_gym.tracker_ids()``); ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm-ncv"`` |
+    | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
     """
@@ -105,14 +108,23 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         energy_weight: float = 2.0,
         error_cap: float | None = None,
         error_scale: float | None = None,
-        window: int = 3,
+        tracker: str = "dgpt-rbcm",
+        window: int | None = 3,
         layout: str = "per_episode",
         **env_kwargs,
     ) -> None:
         if layout not in ("per_episode", "fixed"):
             raise ValueError(f"layout must be 'per_episode' or 'fixed'; got {layout!r}")
         env_kwargs.setdefault("trajectory", "random")
-        super().__init__(DGPT(window=window), error_scale, env_kwargs)
+        tracker = check_choice("tracker", tracker, tuple(tracker_ids()))
+        options = {} if window is None else {"window": check_integer("window", window, low=1)}
+        try:
+            inner_tracker = make_tracker(tracker, **options)
+        except TypeError as error:
+            raise ValueError(
+                f"tracker {tracker!r} takes no window argument ({error}); pass window=None"
+            ) from None
+        super().__init__(inner_tracker, error_scale, env_kwargs)
         self.layout = layout
         self.wake_energy = check_real("wake_energy", wake_energy, low=0.0)
         self.startup_energy = check_real("startup_energy", startup_energy, low=0.0)

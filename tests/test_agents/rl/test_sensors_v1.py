@@ -1,5 +1,5 @@
-"""DGPTrackSensors-v1 (agents/rl/sensors_v1.py): checkers, determinism, held-out layouts,
-reward and energy accounting recomputed from what the environment reports, and
+"""DGPTrackSensors-v1 and -v2 (agents/rl/sensors_v1.py): checkers, determinism, held-out
+layouts, reward and energy accounting recomputed from what the environment reports, and
 re-acquisition of a lost track."""
 
 import gymnasium as gym
@@ -14,12 +14,14 @@ from agents.rl.evaluation import ModelPolicy, RandomPolicy, evaluate_policy_on_s
 from agents.rl.sensors_v1 import WAKE_COUNTS
 
 ENV_ID = "DGPTrackSensors-v1"
+BOTH = ["DGPTrackSensors-v1", "DGPTrackSensors-v2"]
 ALL = len(WAKE_COUNTS) - 1
 NEAREST = {count: index for index, count in enumerate(WAKE_COUNTS)}
 
 
-def test_checkers_pass_and_the_same_seed_gives_the_same_episode():
-    env = gym.make(ENV_ID, scenario="S2", clutter_rate=5.0)
+@pytest.mark.parametrize("env_id", BOTH)
+def test_checkers_pass_and_the_same_seed_gives_the_same_episode(env_id):
+    env = gym.make(env_id, scenario="S2", clutter_rate=5.0)
     gymnasium_check_env(env.unwrapped, skip_render_check=True)
     sb3_check_env(env.unwrapped, warn=False)
     env.action_space.seed(1)
@@ -90,7 +92,8 @@ def test_an_empty_sensor_cannot_be_woken():
     assert second["woken"].sum() == 3
 
 
-def test_a_lost_track_is_reacquired_by_waking_every_sensor():
+@pytest.mark.parametrize("env_id", BOTH)
+def test_a_lost_track_is_reacquired_by_waking_every_sensor(env_id):
     """Nothing is woken for 25 steps, so the tracker extrapolates blind and loses the
     target; then the search action wakes every charged sensor, only the sensors that sense
     the target report (clutter at detecting sensors), and the track is back within 5 steps.
@@ -98,7 +101,7 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor():
     back."""
 
     def run(recovery_action):
-        env = gym.make(ENV_ID, scenario="S1", clutter_rate=1.0).unwrapped
+        env = gym.make(env_id, scenario="S1", clutter_rate=1.0).unwrapped
         env.reset(seed=2)
         errors = [env.step(NEAREST[8])[4]["error"] for _ in range(10)]
         errors += [env.step(NEAREST[0])[4]["error"] for _ in range(25)]
@@ -111,6 +114,36 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor():
     assert recovered < 5.0  # measured 0.8 m (1.5 m at the first search step)
     _, not_recovered = run(NEAREST[16])
     assert not_recovered > 150.0  # measured 212 m and growing
+
+
+def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
+    """The same class; v2 fixes ``tracker="dgpt-bcm-ncv"`` (window 20), so the same seed
+    and actions give the episode of v1 made with those arguments."""
+    from agents.state_space_dgpt import StateSpaceDGPT
+
+    v2 = gym.make("DGPTrackSensors-v2", scenario="S3").unwrapped
+    v1 = gym.make(ENV_ID, scenario="S3", tracker="dgpt-bcm-ncv", window=20).unwrapped
+    assert isinstance(v2.tracker, StateSpaceDGPT) and v2.tracker.window == 20
+    assert type(gym.make(ENV_ID).unwrapped.tracker).__name__ == "DGPT"
+    for env in (v1, v2):
+        env.reset(seed=7)
+    for action in [NEAREST[8]] * 20 + [NEAREST[2]] * 10:
+        first, second = v1.step(action), v2.step(action)
+        np.testing.assert_array_equal(first[0], second[0])
+        assert first[1] == second[1]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"tracker": "no-such-tracker"}, "tracker must be one of"),
+        ({"tracker": "imm-pda"}, "takes no window argument"),
+        ({"window": 0}, "window must be an integer >= 1"),
+    ],
+)
+def test_bad_tracker_arguments_are_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make(ENV_ID, **kwargs)
 
 
 @pytest.mark.parametrize("action", [-1, len(WAKE_COUNTS), 1.5, "2", np.array([1, 2])])
@@ -144,10 +177,11 @@ def test_the_committed_agents_load_and_act(tmp_path):
         observation, *_ = env.step(action)
 
 
-def test_the_observation_describes_the_prediction_and_the_sensors():
+@pytest.mark.parametrize("env_id", BOTH)
+def test_the_observation_describes_the_prediction_and_the_sensors(env_id):
     """Every field of the observation recomputed from the tracker's prediction, the
     sensor layout and what ``info`` reports."""
-    env = gym.make(ENV_ID, scenario="S4").unwrapped
+    env = gym.make(env_id, scenario="S4").unwrapped
     env.reset(seed=6)
     positions, silent = env.inner.network.positions, 0
     for step, action in enumerate([NEAREST[8]] * 12 + [NEAREST[0]] * 3 + [NEAREST[4]] * 3):
