@@ -14,6 +14,12 @@
     python scripts/sensors_baselines.py --seeds 20 --training-seeds 10
     python scripts/sensors_baselines.py --models models/sensors-v1-ppo-seed*   # with agents
     python scripts/sensors_baselines.py --env DGPTrackSensors-v2 --models models/sensors-v2-ppo-seed*
+    python scripts/sensors_baselines.py --training-table   # every policy on training seeds only
+
+``--training-table`` runs every fixed count, the random policy and every setting of the rules
+on the training seeds only, prints their means and writes the per-seed rows to
+OUT/training_returns_VERSION.csv (what compared the trackers inside v1 and v2); it reports
+nothing on the evaluation seeds.
 
 ``--models``: folders written by ``scripts/train_rl.py`` (model.zip, config.json,
 vecnormalize.pkl); each agent is evaluated without training, and the agents together are
@@ -28,6 +34,7 @@ of the 25 %-trimmed mean gives the same interval without another dependency.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import sys
@@ -155,6 +162,41 @@ def _against_each_rule(by_name: dict, agents: list[str], rules: list[str]) -> li
     return lines
 
 
+def training_table(args, env, env_kwargs: dict, version: str) -> int:
+    """Every fixed count, the random policy and every rule setting on the training seeds:
+    prints the means and writes one row per (policy, seed) to
+    ``OUT/training_returns_VERSION.csv``."""
+    constants, _ = env.unwrapped.fixed_actions()
+    policies = {name: ("constant", action) for name, action in constants.items()}
+    policies["random"] = ("random", None)
+    for kind, grid in HEURISTIC_GRIDS.items():
+        for setting in grid:
+            label = ", ".join(f"{key}={value}" for key, value in setting.items())
+            policies[f"{kind} ({label})"] = (kind, setting)
+    seeds = list(range(1000, 1000 + args.training_seeds))
+    names = list(policies)
+    results = run_all(
+        [(*policies[name], args.env, env_kwargs, seeds) for name in names], args.workers
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"training_returns_{version}.csv"
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["policy", "seed", "return", "mean_error", "per_step"])
+        for name, rows in zip(names, results):
+            for row in rows:
+                writer.writerow(
+                    [name, row["seed"], row["return"], row["mean_error"], row["per_step"]]
+                )
+            print(
+                f"{name:40s} mean return {np.mean([r['return'] for r in rows]):8.1f}  mean error "
+                f"{np.mean([r['mean_error'] for r in rows]):7.1f} m  sensors per step "
+                f"{np.mean([r['per_step'] for r in rows]):6.1f}"
+            )
+    print(f"wrote {path}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS, help="the task")
@@ -167,10 +209,17 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
     )
+    parser.add_argument(
+        "--training-table",
+        action="store_true",
+        help="every policy on the training seeds only, to a CSV in --out; no evaluation",
+    )
     args = parser.parse_args(argv)
     env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
     env = gym.make(args.env, **env_kwargs)
     version = args.env.rsplit("-", 1)[1]
+    if args.training_table:
+        return training_table(args, env, env_kwargs, version)
     constants, _ = env.unwrapped.fixed_actions()
 
     # 1. the rules' settings on training seeds
