@@ -66,11 +66,15 @@ def ncv_predict(mean: np.ndarray, cov: np.ndarray, dt: float, q: np.ndarray):
     q = np.asarray(q, dtype=float)
     p, v = mean[..., 0], mean[..., 1]
     a, b, d = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
-    new_mean = np.stack([p + dt * v, v], axis=-1)
+    new_p = p + dt * v
+    new_mean = np.empty(new_p.shape + (2,))  # filled in place: np.stack costs more here
+    new_mean[..., 0], new_mean[..., 1] = new_p, v
     new_a = a + 2.0 * dt * b + dt * dt * d + q * dt**3 / 3.0
     new_b = b + dt * d + q * dt**2 / 2.0
     new_d = d + q * dt
-    new_cov = np.stack([np.stack([new_a, new_b], -1), np.stack([new_b, new_d], -1)], -2)
+    new_cov = np.empty(np.broadcast_shapes(new_a.shape, new_b.shape, new_d.shape) + (2, 2))
+    new_cov[..., 0, 0], new_cov[..., 1, 1] = new_a, new_d
+    new_cov[..., 0, 1] = new_cov[..., 1, 0] = new_b
     return new_mean, new_cov
 
 

@@ -436,24 +436,19 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     their pooled sums at (episode, trial point, axis)."""
     first = trackers[0]
     length = max(len(tracker.steps_) for tracker in trackers)
-    padding = PooledSummaries(*np.zeros((5, 2)))
-    steps = []
-    for index in range(length):
-        rows = []
-        for tracker in trackers:
-            position = index - (length - len(tracker.steps_))
-            if position < 0:
-                rows.append((0.0, False, padding))
-            else:
-                rows.append((tracker.steps_[position].dt, True, tracker.pooled_[position]))
-        dt, valid, pooled = zip(*rows)
-        steps.append(
-            (
-                np.array(dt)[:, None, None],
-                np.array(valid)[:, None, None],
-                PooledSummaries(*(np.stack(field)[:, None, :] for field in zip(*pooled))),
-            )
-        )
+    # (step, tracker, field, axis), padded at the front with zero sums that are skipped
+    sums = np.zeros((length, len(trackers), len(PooledSummaries._fields), 2))
+    dt = np.zeros((length, len(trackers), 1, 1))
+    valid = np.zeros((length, len(trackers), 1, 1), dtype=bool)
+    for column, tracker in enumerate(trackers):
+        start = length - len(tracker.steps_)
+        sums[start:, column] = tracker.pooled_
+        dt[start:, column, 0, 0] = [step.dt for step in tracker.steps_]
+        valid[start:, column] = True
+    steps = [
+        (dt[index], valid[index], PooledSummaries(*np.moveaxis(sums[index], 1, 0)[:, :, None]))
+        for index in range(length)
+    ]
     log_q = np.stack([tracker.log_q_ for tracker in trackers])
     log_likelihood, _, _ = filter_steps(
         first.aggregation,
