@@ -297,28 +297,28 @@ def filter_steps(method, steps, mean, cov, q, manoeuvre: Manoeuvre | None = None
     cov = np.broadcast_to(cov, shape + (2, 2))
     total = np.zeros(shape)
     components = process_noise_components(q, manoeuvre)
+    # the components side by side on a last axis of their own (of the state's, before it)
+    intensities = np.stack([np.broadcast_to(c, shape) for c, _ in components], axis=-1)
+    log_priors = np.log([probability for _, probability in components])
     with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries
         for dt, valid, data in steps:
-            log_weights, means, covs = [], [], []
-            for intensity, probability in components:
-                prior_mean, prior_cov = ncv_predict(mean, cov, dt, intensity)
-                if isinstance(data, PooledSummaries):
-                    log_likelihood = pooled_log_likelihood(
-                        prior_mean[..., 0], prior_cov[..., 0, 0], data
-                    )
-                    posterior = pooled_update(method, prior_mean, prior_cov, data)
-                else:
-                    log_likelihood = step_log_likelihood(
-                        prior_mean[..., 0], prior_cov[..., 0, 0], *data
-                    )
-                    posterior = fused_update(method, prior_mean, prior_cov, *data)
-                log_weights.append(np.log(probability) + log_likelihood)
-                means.append(posterior[0])
-                covs.append(posterior[1])
-            log_weights = np.stack(log_weights, axis=-1)
-            step_mean, step_cov = reduce_mixture(
-                log_weights, np.stack(means, axis=-2), np.stack(covs, axis=-3)
+            prior_mean, prior_cov = ncv_predict(
+                mean[..., None, :], cov[..., None, :, :], np.asarray(dt)[..., None], intensities
             )
+            if isinstance(data, PooledSummaries):
+                data = PooledSummaries(*(np.asarray(field)[..., None] for field in data))
+                log_likelihood = pooled_log_likelihood(
+                    prior_mean[..., 0], prior_cov[..., 0, 0], data
+                )
+                step_means, step_covs = pooled_update(method, prior_mean, prior_cov, data)
+            else:
+                data = tuple(np.asarray(array)[..., None, :] for array in data)
+                log_likelihood = step_log_likelihood(
+                    prior_mean[..., 0], prior_cov[..., 0, 0], *data
+                )
+                step_means, step_covs = fused_update(method, prior_mean, prior_cov, *data)
+            log_weights = log_priors + log_likelihood
+            step_mean, step_cov = reduce_mixture(log_weights, step_means, step_covs)
             valid = np.asarray(valid)
             total = np.where(valid, total + np.logaddexp.reduce(log_weights, axis=-1), total)
             mean = np.where(valid[..., None], step_mean, mean)
