@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from dgpt_gym.benchmark.cli import with_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -164,12 +166,14 @@ def test_evaluate_explains_a_bad_output_folder(tmp_path):
 
 
 def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
-    """The scripts behind docs/rl_sensors_v1.md and the agents' action table, on 2 seeds
+    """The scripts behind docs/rl_sensors_v2.md and the agents' action table, on 2 seeds
     (the documented runs use 100 and 20): the table has every policy and the pooled agents,
     the figure is written, and the agents' actions are tabulated by situation."""
-    model = str(ROOT / "models" / "sensors-v1-ppo-seed0")
+    model = str(ROOT / "models" / "sensors-v2-ppo-seed0")
     result = run_script(
         "sensors_baselines.py",
+        "--env",
+        "DGPTrackSensors-v2",
         "--seeds",
         "2",
         "--training-seeds",
@@ -182,7 +186,7 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
         model,
     )
     assert result.returncode == 0, result.stderr
-    table = (tmp_path / "rl_sensors_v1.md").read_text()
+    table = (tmp_path / "rl_sensors_v2.md").read_text()
     for row in (
         "| nearest 0 |",
         "| all |",
@@ -190,13 +194,35 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
         "| uncertainty radius",
         "| silence search",
         "| **1 agents together** |",
-        "| agent sensors-v1-ppo-seed0 |",
+        "| agent sensors-v2-ppo-seed0 |",
     ):
         assert row in table
-    assert (tmp_path / "figures" / "rl_sensors_v1_pareto.png").stat().st_size > 10_000
+    assert (tmp_path / "figures" / "rl_sensors_v2_pareto.png").stat().st_size > 10_000
     result = run_script("agent_actions.py", model, "--seeds", "1")
     assert result.returncode == 0, result.stderr
     assert "| after a silent step |" in result.stdout and "| sigma < 10 m |" in result.stdout
     result = run_script("agent_actions.py", str(ROOT / "models" / "window-ppo"), "--seeds", "1")
     assert result.returncode == 0, result.stderr
     assert "mean window" in result.stdout and "| 3+ experts |" in result.stdout
+
+
+def test_the_paired_iqm_difference_pairs_the_seeds():
+    """scripts/sensors_baselines.py's paired bootstrap of IQM(agents) - IQM(rule): agents
+    that add exactly 5 to the rule's return on every seed give 5 with a zero-width
+    interval, whatever the spread over seeds (a bootstrap that resampled the two sides
+    independently would give an interval about +-2 wide here); with noise of standard
+    deviation 1 per (agent, seed) the interval still covers 5 and is far narrower than the
+    seeds' spread of 10."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "sensors_baselines", ROOT / "scripts" / "sensors_baselines.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rng = np.random.default_rng(3)
+    rule = 10.0 * rng.normal(size=100)
+    exact = module.paired_iqm_difference(np.stack([rule + 5.0] * 5), rule)
+    np.testing.assert_allclose(exact, (5.0, 5.0, 5.0), rtol=0, atol=1e-9)
+    noisy = module.paired_iqm_difference(np.stack([rule + 5.0 + rng.normal(size=100)] * 5), rule)
+    assert noisy[1] < 5.0 < noisy[2] and noisy[2] - noisy[1] < 1.0
