@@ -154,22 +154,24 @@ def test_bad_actions_are_refused(action):
         env.step(action)
 
 
-def test_the_committed_agents_load_and_act(tmp_path):
+@pytest.mark.parametrize("env_id", BOTH)
+def test_the_committed_agents_load_and_act(env_id):
     """models/ holds the trained agents the docs quote; they load with their frozen
     normaliser and act on raw observations of the environment they were trained on."""
     from pathlib import Path
 
-    from agents.rl.evaluation import ModelPolicy
     from agents.rl.training import load_agent
 
-    folders = sorted((Path(__file__).parents[3] / "models").glob("sensors-v1-ppo-seed*"))
+    version = env_id.rsplit("-", 1)[1]
+    models = Path(__file__).parents[3] / "models"
+    folders = sorted(models.glob(f"sensors-{version}-ppo-seed*"))
     assert len(folders) == 5
     for folder in folders:
         assert sum(f.stat().st_size for f in folder.iterdir()) <= 1_000_000
     model, config = load_agent(folders[0])
-    assert config["env"] == ENV_ID and config["normalizer"] is not None
+    assert config["env"] == env_id and config["normalizer"] is not None
     policy = ModelPolicy(model, config["normalizer"])
-    env = gym.make(ENV_ID, **config["env_kwargs"])
+    env = gym.make(env_id, **config["env_kwargs"])
     observation, _ = env.reset(seed=0)
     for _ in range(5):
         action = policy.predict(observation)
