@@ -147,6 +147,7 @@ QUICK_SWEEP = (
             "dgpt-gpoe",
             "dgpt-bcm-ncv",
             "hybrid",
+            "hybrid-ncv",
             "cpf",
             "imm-pda",
             "clairvoyant",
@@ -155,8 +156,9 @@ QUICK_SWEEP = (
     ),
 )
 """``scripts/evaluate.py`` with no options (and ``make evaluate``): about a minute on 2
-cores. It includes ``dgpt-bcm-ncv``, the state-space NCV tracker that is not yet in the
-``--paper`` grid, so that the main command shows it beside the defaults."""
+cores. Besides the paper's defaults it has ``dgpt-bcm-ncv``, the distributed NCV GP in
+state-space form, and ``hybrid-ncv``, the hybrid filter around it (the most accurate
+GP-based tracker of the ``--paper`` grid), so that the main command shows them."""
 
 PAPER_SWEEP = (
     Grid(
