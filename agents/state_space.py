@@ -297,7 +297,8 @@ def filter_steps(method, steps, mean, cov, q, manoeuvre: Manoeuvre | None = None
     cov = np.broadcast_to(cov, shape + (2, 2))
     total = np.zeros(shape)
     components = process_noise_components(q, manoeuvre)
-    # the components side by side on a last axis of their own (of the state's, before it)
+    # the process-noise components on an axis of their own, before the state's axes, so that
+    # one prediction, likelihood and update per step serve them all
     intensities = np.stack([np.broadcast_to(c, shape) for c, _ in components], axis=-1)
     log_priors = np.log([probability for _, probability in components])
     with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries

@@ -5,8 +5,8 @@ run on the evaluation seeds of the environment it was trained on; what it set ea
 (the environment's knob: window C, gate threshold or sensors woken) is tabulated by what the
 observation says:
 
-- ``DGPTrackSensors-v1`` / ``-v2``: the prediction's larger standard deviation (below 10 m, 10-30 m,
-  above 30 m) while sensors report, and the steps after a step without any report;
+- ``DGPTrackSensors-v1`` / ``-v2``: the prediction's larger standard deviation (below 10 m,
+  10-30 m, above 30 m) while sensors report, and the steps after a step without any report;
 - ``DGPTrackWindow-v0`` / ``DGPTrackGating-v0``: after a step without measurements; a
   surprise (the gated summaries lie more than 10 m, a fifth of the sensing range, from
   their predictions on average); otherwise 1-2 experts or 3 and more.
@@ -82,8 +82,7 @@ def main(argv=None) -> int:
         env = gym.make(config["env"], **config["env_kwargs"])
         situations = (
             SENSOR_SITUATIONS
-            if config["env"].startswith("DGPTrackSensors-v")
-            and config["env"] != "DGPTrackSensors-v0"
+            if config["env"] in ("DGPTrackSensors-v1", "DGPTrackSensors-v2")
             else TUNING_SITUATIONS
         )
         classify = sensor_situation if situations is SENSOR_SITUATIONS else tuning_situation

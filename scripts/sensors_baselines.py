@@ -4,11 +4,11 @@
    random paths in layouts drawn from those seeds): the setting with the best mean return.
 2. Runs every policy on the evaluation seeds 0..N-1 (paths and layouts no training episode
    used): waking the nearest n for every n, waking all, a random policy, the tuned rules.
-3. Writes docs/rl_sensors_v1.md or docs/rl_sensors_v2.md (interquartile mean of the return with a 95 % bootstrap
-   interval, mean NRMSE, sensors woken per step, and the paired difference to the best
-   rule seed by seed; with agents, also their paired differences to every tuned rule, of the
-   IQM by a bootstrap over seeds and of the mean) and
-   docs/figures/rl_sensors_v1_pareto.png (or ..._v2_...; sensors woken per step
+3. Writes docs/rl_sensors_v1.md or docs/rl_sensors_v2.md (interquartile mean of the return
+   with a 95 % bootstrap interval, mean NRMSE, sensors woken per step, and the paired
+   difference to the best rule seed by seed; with agents, also their paired differences to
+   every tuned rule, of the IQM by a bootstrap over seeds and of the mean) and
+   docs/figures/rl_sensors_v1_pareto.png or ..._v2_pareto.png (sensors woken per step
    against the mean error, every policy).
 
     python scripts/sensors_baselines.py                      # S1, clutter 5, 100 seeds
