@@ -32,7 +32,7 @@ import gymnasium as gym  # noqa: E402
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.evaluation import ModelPolicy  # noqa: E402
 from agents.rl.features import FEATURE_NAMES  # noqa: E402
-from agents.rl.sensors_v1 import OBSERVED_CANDIDATES  # noqa: E402
+from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, DGPTrackSensorsV1Env  # noqa: E402
 from agents.rl.training import load_agent  # noqa: E402
 
 SENSOR_SITUATIONS = ("sigma < 10 m", "sigma 10-30 m", "sigma > 30 m", "after a silent step")
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
         env = gym.make(config["env"], **config["env_kwargs"])
         situations = (
             SENSOR_SITUATIONS
-            if config["env"] in ("DGPTrackSensors-v1", "DGPTrackSensors-v2")
+            if isinstance(env.unwrapped, DGPTrackSensorsV1Env)
             else TUNING_SITUATIONS
         )
         classify = sensor_situation if situations is SENSOR_SITUATIONS else tuning_situation

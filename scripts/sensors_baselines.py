@@ -62,9 +62,15 @@ from agents.rl.heuristics import (  # noqa: E402
     SilenceSearchPolicy,
     UncertaintyRadiusPolicy,
 )
+from agents.rl.registration import ENVIRONMENTS  # noqa: E402
 from agents.rl.training import load_agent  # noqa: E402
 
-ENV_IDS = ("DGPTrackSensors-v1", "DGPTrackSensors-v2")
+ENV_IDS = tuple(
+    environment.id
+    for environment in ENVIRONMENTS
+    if environment.entry_point == "agents.rl.sensors_v1:DGPTrackSensorsV1Env"
+)
+"""The sensor tasks this script evaluates: v1 and every id that fixes its arguments (v2)."""
 RULES = {"uncertainty radius": UncertaintyRadiusPolicy, "silence search": SilenceSearchPolicy}
 
 

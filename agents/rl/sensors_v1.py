@@ -7,8 +7,8 @@ from gymnasium import spaces
 
 from agents.rl.base import TrackerInsideEnv
 from agents.rl.sensors_env import filter_reports
-from dgpt_gym.registry import make_tracker, tracker_ids
-from dgpt_gym.validation import check_choice, check_integer, check_real
+from dgpt_gym.registry import make_tracker
+from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["DGPTrackSensorsV1Env", "WAKE_COUNTS", "OBSERVED_CANDIDATES", "TOP_SPEED"]
 
@@ -93,7 +93,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``energy_weight`` | 2.0 | reward per unit of battery spent |
     | ``error_cap`` | 4 x sensing range | m, the largest error the reward counts |
     | ``error_scale`` | sensing range | metres per unit of error penalty |
-    | ``tracker`` | ``"dgpt-rbcm"`` | the registered id of the tracker inside (``dgpt_gym.tracker_ids()``); ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm-ncv"`` |
+    | ``tracker`` | ``"dgpt-rbcm"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm-ncv"`` |
     | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
@@ -116,7 +116,6 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         if layout not in ("per_episode", "fixed"):
             raise ValueError(f"layout must be 'per_episode' or 'fixed'; got {layout!r}")
         env_kwargs.setdefault("trajectory", "random")
-        tracker = check_choice("tracker", tracker, tuple(tracker_ids()))
         options = {} if window is None else {"window": check_integer("window", window, low=1)}
         try:
             inner_tracker = make_tracker(tracker, **options)
