@@ -32,6 +32,7 @@ __all__ = [
     "gamma_one_step",
     "gamma_anytime",
     "affine_combination_bound",
+    "mixture_half_width",
     "mean_coefficients",
     "ucb_half_width",
     "cumulative_bound",
@@ -130,6 +131,26 @@ def affine_combination_bound(std: np.ndarray, gamma: np.ndarray, coefficients: n
     gamma_i^(1/2) sigma_i (then f - mu = sum_i a_i (f - mu_i)). With a_i >= 0 it is the
     convex-combination bound of eq. (31) and of Theorem 1's and Appendix A's proofs."""
     return np.sum(np.abs(coefficients) * np.sqrt(gamma) * std, axis=-1)
+
+
+def mixture_half_width(
+    weights: np.ndarray, offsets: np.ndarray, std: np.ndarray, delta: float
+) -> np.ndarray:
+    """A half-width u with P(|f - mu| > u) <= ``delta`` when f follows the Gaussian mixture
+    sum_k w_k N(mu + offset_k, std_k^2) (``weights`` (K,) summing to one, ``offsets`` and
+    ``std`` (K, ...)): Lemma 1 on each component, with its share of ``delta`` scaled by its
+    weight. Component k contributes |offset_k| + gamma_k^(1/2) std_k with
+    gamma_k = 2 log(K w_k / delta), so that w_k e^(-gamma_k / 2) = delta / K and the
+    union over the components fails with probability at most delta; a component with
+    w_k <= delta / K can fail outright and contributes nothing. u is the largest
+    contribution (0 if there is none). One component of weight 1 gives Lemma 1's
+    |offset| + (2 log(1 / delta))^(1/2) std."""
+    std = np.asarray(std, dtype=float)
+    weights = np.asarray(weights, dtype=float).reshape((-1,) + (1,) * (std.ndim - 1))
+    share = weights.shape[0] * weights / delta
+    gamma = 2.0 * np.log(np.maximum(share, 1.0))
+    contributions = np.where(share > 1.0, np.abs(offsets) + np.sqrt(gamma) * std, 0.0)
+    return np.max(contributions, axis=0)
 
 
 def ucb_half_width(

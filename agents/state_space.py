@@ -41,6 +41,7 @@ __all__ = [
     "expert_posteriors",
     "expert_weights",
     "fused_update",
+    "aggregate_error_var",
     "step_log_likelihood",
     "PooledSummaries",
     "pool_summaries",
@@ -203,6 +204,43 @@ def fused_update(method, mean, cov, summaries, noise_var):
     pseudo = (gain * summaries).sum(axis=-1) / total_gain
     a = np.asarray(a, dtype=float)[..., None, None]
     return _kalman_update(mean, cov / a, pseudo, 1.0 / total_gain)
+
+
+def aggregate_error_var(method, prior_var, noise_var):
+    """The variance of the aggregated position's error under the model (..., ): how far the
+    mean of :func:`fused_update` is from the target when the state is drawn from the shared
+    prior and each summary is the target's position plus independent noise of variance
+    ``noise_var`` (..., M), M >= 1; ``prior_var`` (...,) is the prior's position variance.
+
+    The aggregate is a Kalman update of N(mu_0, P_0 / a) with the pseudo-summary
+    z* = sum g_i z_i / G (g_i = beta_i / s_i, G = sum g_i), so with the position gain
+    k = (p / a) / (p / a + 1 / G) its position error is (1 - k) (x - mu_0) - k v*, with
+    v* = sum g_i v_i / G:
+
+        (1 - k)^2 p + k^2 sum g_i^2 s_i / G^2.
+
+    For BCM (beta_i = 1, a = 1) this is the posterior variance p / (1 + p G): the BCM is the
+    exact posterior. For the other aggregations it exceeds what their covariance reports
+    whenever that is not the exact one; it is the variance Lemma 1 needs for a bound on the
+    aggregate (:meth:`agents.state_space_dgpt.StateSpaceDGPT`'s UCB), where Theorem 2's
+    triangle inequality over the experts is loose by up to sqrt(M)."""
+    prior_var = np.asarray(prior_var, dtype=float)
+    noise_var = np.asarray(noise_var, dtype=float)
+    beta = expert_weights(method, prior_var, noise_var)
+    if noise_var.shape[-1] == 1:
+        beta = np.ones(beta.shape)
+    gain = beta / noise_var
+    total_gain = gain.sum(axis=-1)
+    if method == "poe":
+        a = np.full(total_gain.shape, float(noise_var.shape[-1]))
+    elif method == "gpoe" and noise_var.shape[-1] > 1:
+        a = beta.sum(axis=-1)
+    else:
+        a = np.ones(total_gain.shape)
+    scaled_prior = prior_var / a
+    k = scaled_prior / (scaled_prior + 1.0 / total_gain)
+    pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
+    return (1.0 - k) ** 2 * prior_var + k**2 * pseudo_noise_var
 
 
 @dataclass(frozen=True)

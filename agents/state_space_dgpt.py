@@ -23,9 +23,13 @@ manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
    exact likelihood of their summaries (:func:`agents.state_space.step_log_likelihood`, a
    sum over experts like eq. (22)'s) and moment-matched
    (:func:`baselines.kalman.reduce_mixture`): the broadcast posterior and the estimate. The UCB
-   half-width is the larger over the components of Theorem 1-2's bound on the component's
-   aggregate (:func:`agents.aggregation.ucb_half_width`) plus its distance to the estimate:
-   the bound of the component the target follows holds with probability 1 - delta.
+   half-width holds with probability 1 - delta under that mixture
+   (:func:`agents.aggregation.mixture_half_width`): Lemma 1 on each component's aggregate,
+   with the standard deviation of the aggregate's error under the model
+   (:func:`agents.state_space.aggregate_error_var`; for BCM the posterior's) and the
+   component's share of delta scaled by its weight, plus its distance to the estimate; the
+   larger over the components. Theorem 2's form, which bounds every expert and adds the
+   bounds, ignores that the experts' errors share the prior's and is up to sqrt(M) wider.
 5. **Learning**: q of each axis climbs the log marginal likelihood of the last C steps with
    data, re-filtered from the broadcast posterior before the oldest of them
    (:func:`agents.state_space.filter_window`): one Newton step in log q per step, from the
@@ -70,6 +74,7 @@ from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
     WindowStep,
+    aggregate_error_var,
     condition_on_position,
     expert_posteriors,
     filter_steps,
@@ -293,12 +298,11 @@ class StateSpaceDGPT(TrackerBase):
                 np.stack([prediction[0] for prediction, _ in predictions], axis=-2),
                 np.stack([prediction[1] for prediction, _ in predictions], axis=-3),
             )
-            ucb = np.max(
-                [
-                    self._ucb(prior_cov, None) + np.abs(prior_mean[:, 0] - mean[:, 0])
-                    for (prior_mean, prior_cov), _ in predictions
-                ],
-                axis=0,
+            ucb = agg.mixture_half_width(
+                np.exp(log_weights),
+                np.stack([prior_mean[:, 0] - mean[:, 0] for (prior_mean, _), _ in predictions]),
+                np.stack([np.sqrt(prior_cov[:, 0, 0]) for (_, prior_cov), _ in predictions]),
+                self.delta,
             )
             self.last_estimate_ = self._keep(step, mean, cov, ucb)
             return None
@@ -327,7 +331,12 @@ class StateSpaceDGPT(TrackerBase):
             self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
         self.expert_sensors_ = best["gated"].sensors
         self.expert_means_, self.expert_covs_ = best["experts"]
-        ucb = np.max([h["ucb"] + np.abs(h["mean"][:, 0] - mean[:, 0]) for h in hypotheses], axis=0)
+        ucb = agg.mixture_half_width(
+            np.exp(log_weights - np.logaddexp.reduce(log_weights)),
+            np.stack([h["mean"][:, 0] - mean[:, 0] for h in hypotheses]),
+            np.stack([h["error_std"] for h in hypotheses]),
+            self.delta,
+        )
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
         return step, mean, cov, ucb
 
@@ -358,7 +367,9 @@ class StateSpaceDGPT(TrackerBase):
             "mean": posterior[0],
             "cov": posterior[1],
             "experts": experts,
-            "ucb": self._ucb(prior_cov, experts[1]),
+            "error_std": np.sqrt(
+                aggregate_error_var(self.aggregation, prior_cov[:, 0, 0], summary_var)
+            ),
         }
 
     def _learn(self) -> None:
@@ -384,18 +395,6 @@ class StateSpaceDGPT(TrackerBase):
         )
         self.fits_ += 1
         self.fits_at_bound_ += int(on_bound.any())
-
-    def _ucb(self, prior_cov, expert_covs) -> np.ndarray:
-        """Theorems 1-2 (:func:`agents.aggregation.ucb_half_width`) on the experts' position
-        variances under the prior ``prior_cov``; without experts, the prior's bound."""
-        if expert_covs is None:
-            expert_var, valid = prior_cov[:, None, 0, 0], np.zeros((2, 1), dtype=bool)
-        else:
-            expert_var = expert_covs[..., 0, 0]
-            valid = np.ones(expert_var.shape, dtype=bool)
-        return agg.ucb_half_width(
-            self.aggregation, expert_var, prior_cov[:, 0, 0], self.delta, valid=valid
-        )
 
     def _keep(self, step, mean, cov, ucb) -> Estimate:
         """Broadcast the step's posterior and return the estimate with the next-step

@@ -6,8 +6,10 @@ sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RM
 on the steps where a sensor senses the target and on the coverage-gap steps), NRMSE
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
 (nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), the median
-step time, and the share of fitted steps that left a hyperparameter on a bound (%, where
-the tracker reports it); then a summary per candidate over the cells. Runs go in lockstep
+step time, the share of fitted steps that left a hyperparameter on a bound (%, where
+the tracker reports it), and over all steps the UCB's coverage (mean of the axes, %) and its
+mean half-width over the RMSE (both per axis, averaged over episodes and axes); then a
+summary per candidate over the cells. Runs go in lockstep
 blocks, where a tracker with a batched step (DGPT) is much cheaper per step than one
 without; compare step costs one episode at a time with ``scripts/bench.py``.
 
@@ -198,7 +200,7 @@ def main(argv=None) -> int:
 
     print(
         "candidate        cell                rmse_2d  det  gap  nrmse%  nees_med_det  cov3_det%"
-        "  ms  bound%"
+        "  ms  bound%  ucb%  ucb/rmse"
     )
     totals = collections.defaultdict(list)
     for (name, scenario, trajectory, clutter), rows in by_cell.items():
@@ -209,16 +211,27 @@ def main(argv=None) -> int:
         nees = float(np.nanmedian([row["nees_median_detected"] for row in rows]))
         rmse = mean(rows, "rmse_2d")
         at_bound = 100 * mean(rows, "share_at_bound") if "share_at_bound" in rows[0] else np.nan
+        ucb_coverage = 50 * (mean(rows, "ucb_coverage_x") + mean(rows, "ucb_coverage_y"))
+        # ucb_width is the full width, 2 x the half-width
+        ucb_ratio = (mean(rows, "ucb_width_x") + mean(rows, "ucb_width_y")) / (
+            2.0 * (mean(rows, "rmse_x") + mean(rows, "rmse_y"))
+        )
         cell = f"{scenario} {trajectory:6s} c{clutter:g}"
         detected, gap = mean(rows, "rmse_2d_detected"), mean(rows, "rmse_2d_gap")
         print(
             f"{name:16s} {cell:18s} {rmse:8.2f} {detected:4.1f} {gap:4.1f} {nrmse:7.2f}"
             f" {nees:12.3f} {coverage:9.2f}"
             f" {float(np.median([row['step_time_ms'] for row in rows])):5.2f} {at_bound:6.1f}"
+            f" {ucb_coverage:5.2f} {ucb_ratio:9.2f}"
         )
-        totals[name].append((trajectory, rmse, nrmse, nees, coverage, at_bound))
+        totals[name].append(
+            (trajectory, rmse, nrmse, nees, coverage, at_bound, ucb_coverage, ucb_ratio)
+        )
     print()
-    print("candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%  bound%")
+    print(
+        "candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%  bound%"
+        "  ucb%  ucb/rmse"
+    )
     for name, cells in totals.items():
         fixed, random = (
             np.mean([c[1] for c in cells if c[0] == mode]) if mode in args.trajectories else np.nan
@@ -227,7 +240,7 @@ def main(argv=None) -> int:
         rest = np.mean([c[2:] for c in cells], axis=0)
         print(
             f"{name:16s} {fixed:10.2f} {random:12.2f} {rest[0]:7.2f} {rest[1]:12.3f}"
-            f" {rest[2]:10.2f} {rest[3]:7.1f}"
+            f" {rest[2]:10.2f} {rest[3]:7.1f} {rest[4]:5.2f} {rest[5]:9.2f}"
         )
     return 0
 

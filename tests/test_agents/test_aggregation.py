@@ -186,3 +186,42 @@ def test_anytime_ucb_by_hand():
     # two experts: delta is split, M = 2 enters the logarithm
     two = agg.ucb_half_width("poe", np.array([1.0, 1.0]), 4.0, delta, step=3)
     assert two == pytest.approx(np.sqrt(2 * np.log(np.pi**2 * 9 * 2 / (6 * delta))), rel=1e-12)
+
+
+def test_mixture_half_width_by_hand():
+    """Component k contributes |offset_k| + (2 log(K w_k / delta))^(1/2) std_k; one
+    component of weight 1 is Lemma 1's bound; a component of weight at most delta / K
+    contributes nothing (it may fail outright)."""
+    delta = 0.01
+    assert agg.mixture_half_width([1.0], [[2.0]], [[3.0]], delta) == pytest.approx(
+        2.0 + 3.0 * np.sqrt(2 * np.log(1 / delta))
+    )
+    got = agg.mixture_half_width(
+        [0.7, 0.3], np.array([[0.5, -4.0], [-1.0, 6.0]]), np.array([[1.0, 2.0], [8.0, 0.5]]), delta
+    )
+    first = np.array([0.5, 4.0]) + np.sqrt(2 * np.log(140.0)) * np.array([1.0, 2.0])
+    second = np.array([1.0, 6.0]) + np.sqrt(2 * np.log(60.0)) * np.array([8.0, 0.5])
+    np.testing.assert_allclose(got, np.maximum(first, second), rtol=1e-12)
+    # weight 0.004 <= delta / 2: the wide component is left to its share of delta
+    got = agg.mixture_half_width([0.996, 0.004], [[0.0], [50.0]], [[1.0], [100.0]], delta)
+    assert got == pytest.approx(np.sqrt(2 * np.log(2 * 0.996 / delta)))
+
+
+@given(
+    weights=st.lists(st.floats(1e-4, 1.0), min_size=1, max_size=4),
+    offsets=st.lists(st.floats(-30.0, 30.0), min_size=4, max_size=4),
+    stds=st.lists(st.floats(0.05, 40.0), min_size=4, max_size=4),
+    delta=st.floats(1e-4, 0.2),
+)
+@settings(max_examples=60, deadline=None)
+def test_mixture_half_width_fails_with_probability_at_most_delta(weights, offsets, stds, delta):
+    """The exact probability that a draw from the mixture falls outside +-u (Gaussian tails
+    from scipy) is at most delta."""
+    from scipy.stats import norm
+
+    weights = np.asarray(weights) / np.sum(weights)
+    k = len(weights)
+    offsets, stds = np.asarray(offsets[:k]), np.asarray(stds[:k])
+    u = agg.mixture_half_width(weights, offsets, stds, delta)
+    miss = np.sum(weights * (norm.sf(u, offsets, stds) + norm.cdf(-u, offsets, stds)))
+    assert miss <= delta * (1 + 1e-9)

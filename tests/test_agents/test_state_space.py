@@ -15,13 +15,13 @@ from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
 
 import dgpt_gym  # noqa: F401  (registers the environment)
-from agents import aggregation as agg
 from agents import gp
 from agents.gating import gate_measurements
 from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
     WindowStep,
+    aggregate_error_var,
     condition_on_position,
     expert_posteriors,
     filter_steps,
@@ -101,6 +101,66 @@ def test_fused_update_is_the_aggregation_of_the_experts_local_posteriors(method,
         one_mean, one_cov = dense_aggregate(method, mean, cov, [z], [r])
         np.testing.assert_allclose(m, one_mean, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(c, one_cov, rtol=1e-9, atol=1e-9)
+
+
+def dense_error_var(method, prior_cov, noise_var):
+    """The variance of the dense aggregate's position error, from its linear map: the
+    aggregated position is c . mu_0 + sum_i c_i z_i (coefficients read off
+    :func:`dense_aggregate` with unit inputs), unbiased (c = (1 - sum_i c_i) e1); with
+    x ~ N(mu_0, P0) and z_i = x_p + v_i its error is (1 - sum_i c_i) (x_p - mu_0p) -
+    sum_i c_i v_i."""
+    n = len(noise_var)
+
+    def position(prior_mean, summaries):
+        return dense_aggregate(method, prior_mean, prior_cov, summaries, noise_var)[0][0]
+
+    zero = position(np.zeros(2), np.zeros(n))
+    assert abs(zero) < 1e-9  # linear, no offset
+    c = np.array([position(np.eye(2)[k], np.zeros(n)) for k in range(2)])
+    c_i = np.array([position(np.zeros(2), np.eye(n)[i]) for i in range(n)])
+    np.testing.assert_allclose(c, [1.0 - c_i.sum(), 0.0], atol=1e-9)
+    return (1.0 - c_i.sum()) ** 2 * prior_cov[0, 0] + np.sum(c_i**2 * np.asarray(noise_var))
+
+
+@pytest.mark.parametrize("method", ["poe", "gpoe", "bcm", "rbcm"])
+@given(seed=seeds, n_experts=st.integers(1, 5))
+@settings(max_examples=25, deadline=None)
+def test_aggregate_error_var_is_the_dense_aggregates_error_variance(method, seed, n_experts):
+    rng = np.random.default_rng(seed)
+    _, cov = random_state(rng)
+    noise_var = rng.uniform(0.5, 20.0, n_experts)
+    got = aggregate_error_var(method, cov[0, 0], noise_var)
+    np.testing.assert_allclose(got, dense_error_var(method, cov, noise_var), rtol=1e-9)
+    # BCM is the exact posterior: its error variance is the variance it reports, and no
+    # other aggregation's mean has a smaller one
+    exact_var = fused_update("bcm", np.zeros(2), cov, np.zeros(n_experts), noise_var)[1][0, 0]
+    if method == "bcm" or n_experts == 1:
+        np.testing.assert_allclose(got, exact_var, rtol=1e-9)
+    assert got >= exact_var * (1 - 1e-9)
+
+
+def test_rbcm_error_variance_is_what_states_drawn_from_the_model_give():
+    """Monte Carlo under the model (state from the prior, summaries = position + noise): the
+    sample variance of RBCM's position error matches :func:`aggregate_error_var` within
+    4 standard errors of a variance from n = 40000 Gaussian draws (sqrt(2 / n) = 0.7 %),
+    and is visibly larger than the variance RBCM reports."""
+    rng = np.random.default_rng(11)
+    mean, cov = np.array([3.0, -1.0]), np.array([[40.0, 6.0], [6.0, 4.0]])
+    noise_var = np.array([2.0, 5.0, 1.0, 30.0])
+    n = 40000
+    states = rng.multivariate_normal(mean, cov, n)
+    summaries = states[:, :1] + rng.normal(0.0, np.sqrt(noise_var), (n, 4))
+    aggregate, reported = fused_update(
+        "rbcm",
+        np.broadcast_to(mean, (n, 2)),
+        np.broadcast_to(cov, (n, 2, 2)),
+        summaries,
+        np.broadcast_to(noise_var, (n, 4)),
+    )
+    errors = states[:, 0] - aggregate[:, 0]
+    expected = aggregate_error_var("rbcm", cov[0, 0], noise_var)
+    assert abs(errors.var() / expected - 1) < 4 * np.sqrt(2 / n)
+    assert expected > 1.1 * reported[0, 0, 0]
 
 
 @given(seed=seeds, noise_var=st.floats(0.01, 100.0))
@@ -188,20 +248,21 @@ def test_two_component_step_is_the_dense_mixture(seed, probability, intensity):
     log_likelihood, mean, _ = filter_window(
         "bcm", [step], np.array([q]), np.array([1.0]), manoeuvre
     )
-    densities, posterior_means = [], []
+    log_densities, posterior_means = [], []  # logs: a far summary underflows the density
     for weight, intensity_k in ((1 - probability, q), (probability, q + intensity)):
         transition, noise = constant_velocity_model(1.0, intensity_k)
         prior_mean, prior_cov = kalman_predict(
             start_mean, start_cov, transition[:2, :2], noise[:2, :2]
         )
         cov = prior_cov[0, 0] * np.ones((m, m)) + np.diag(1.0 + spread)
-        densities.append(
-            weight * multivariate_normal(np.full(m, prior_mean[0]), cov).pdf(summaries)
+        log_densities.append(
+            np.log(weight) + multivariate_normal(np.full(m, prior_mean[0]), cov).logpdf(summaries)
         )
         gain = prior_cov[0, 0] * np.linalg.solve(cov, summaries - prior_mean[0]).sum()
         posterior_means.append(prior_mean[0] + gain)
-    np.testing.assert_allclose(log_likelihood[0], np.log(sum(densities)), rtol=1e-9)
-    expected = np.dot(densities, posterior_means) / sum(densities)
+    total = np.logaddexp(*log_densities)
+    np.testing.assert_allclose(log_likelihood[0], total, rtol=1e-9)
+    expected = np.dot(np.exp(np.array(log_densities) - total), posterior_means)
     np.testing.assert_allclose(mean[0, 0], expected, rtol=1e-9, atol=1e-9)
 
 
@@ -283,7 +344,8 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
     NCV prediction (the Stone-Soup-checked Kalman prediction), the gated summaries, their
     joint Gaussian likelihood (scipy) and the dense aggregate; the estimate is the mixture
     weighted by prior probability times likelihood (moments component by component), the UCB
-    is the larger component bound plus its distance to the estimate, and the next-step
+    is the larger over the components of Lemma 1 on the component's error (its share of delta
+    scaled by its weight) plus its distance to the estimate, and the next-step
     prediction carries q + p q_m with the q just learnt. Without data the components keep their prior weights."""
     spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
     rng = np.random.default_rng(8)
@@ -340,8 +402,7 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
             m, c = dense_aggregate("rbcm", *prediction[axis], z, r)
             axis_means.append(m)
             axis_covs.append(c)
-            expert_var = 1.0 / (1.0 / p + 1.0 / r)
-            axis_bounds.append(agg.ucb_half_width("rbcm", expert_var, p, 0.01))
+            axis_bounds.append(np.sqrt(dense_error_var("rbcm", prediction[axis][1], r)))
         log_weights.append(log_weight)
         means.append(axis_means)
         covs.append(axis_covs)
@@ -351,7 +412,13 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
         mean, cov = mixture_moments(log_weights, means[:, axis], covs[:, axis])
         np.testing.assert_allclose(tracker.mean_[axis], mean, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-9, atol=1e-9)
-        expected_ucb = max(bounds[k][axis] + abs(means[k, axis, 0] - mean[0]) for k in range(2))
+        # Lemma 1 on each component's error std, its share of delta scaled by its weight
+        weights = np.exp(np.array(log_weights) - np.logaddexp(*log_weights))
+        expected_ucb = max(
+            abs(means[k, axis, 0] - mean[0])
+            + np.sqrt(2 * np.log(2 * weights[k] / 0.01)) * bounds[k][axis]
+            for k in range(2)
+        )
         np.testing.assert_allclose(estimate.ucb[axis], expected_ucb, rtol=1e-9)
         # with the q learnt at this step, which the next step predicts with
         learnt = np.exp(tracker.log_q_[axis])
@@ -379,8 +446,12 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
         )
         np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-9)
         np.testing.assert_allclose(estimate.mean[axis], mean[0], rtol=1e-12)
-        larger = max(c[0, 0] for _, c in predictions)
-        np.testing.assert_allclose(estimate.ucb[axis], np.sqrt(2 * np.log(1 / 0.01) * larger))
+        # prior weights 0.8 and 0.2, equal means: the larger of the components' bounds
+        expected_ucb = max(
+            np.sqrt(2 * np.log(2 * w / 0.01) * c[0, 0])
+            for w, (_, c) in zip((0.8, 0.2), predictions)
+        )
+        np.testing.assert_allclose(estimate.ucb[axis], expected_ucb, rtol=1e-12)
 
 
 def test_an_experts_local_posterior_uses_only_its_own_data_and_the_broadcast_prior():
