@@ -195,19 +195,31 @@ def fused_update(method, mean, cov, summaries, noise_var):
     """
     if method in POOLED_METHODS:
         return pooled_update(method, mean, cov, pool_summaries(summaries, noise_var))
-    beta = expert_weights(method, cov[..., 0, 0], noise_var)
-    if summaries.shape[-1] == 1:
-        beta = np.ones(beta.shape)
-    gain = beta / noise_var
+    gain, a = _fusion_weights(method, cov[..., 0, 0], noise_var)
     total_gain = gain.sum(axis=-1)
-    a = beta.sum(axis=-1) if method == "gpoe" and summaries.shape[-1] > 1 else 1.0
     pseudo = (gain * summaries).sum(axis=-1) / total_gain
-    a = np.asarray(a, dtype=float)[..., None, None]
-    return _kalman_update(mean, cov / a, pseudo, 1.0 / total_gain)
+    return _kalman_update(mean, cov / a[..., None, None], pseudo, 1.0 / total_gain)
+
+
+def _fusion_weights(method, prior_var, noise_var):
+    """``(g (..., M), a (...))`` of :func:`fused_update`'s Kalman update of N(mu_0, P_0 / a)
+    with the pseudo-summary sum g_i z_i / sum g_i: g_i = beta_i / s_i (beta_i = 1 for a
+    single expert), a = M for PoE, sum beta_i for GPoE with more than one expert, else 1."""
+    noise_var = np.asarray(noise_var, dtype=float)
+    beta = expert_weights(method, prior_var, noise_var)
+    if noise_var.shape[-1] == 1:
+        beta = np.ones(beta.shape)
+    if method == "poe":
+        a = np.full(beta.shape[:-1], float(noise_var.shape[-1]))
+    elif method == "gpoe" and noise_var.shape[-1] > 1:
+        a = beta.sum(axis=-1)
+    else:
+        a = np.ones(beta.shape[:-1])
+    return beta / noise_var, a
 
 
 def aggregate_error_var(method, prior_var, noise_var):
-    """The variance of the aggregated position's error under the model (..., ): how far the
+    """The variance of the aggregated position's error under the model (...,): how far the
     mean of :func:`fused_update` is from the target when the state is drawn from the shared
     prior and each summary is the target's position plus independent noise of variance
     ``noise_var`` (..., M), M >= 1; ``prior_var`` (...,) is the prior's position variance.
@@ -220,23 +232,15 @@ def aggregate_error_var(method, prior_var, noise_var):
         (1 - k)^2 p + k^2 sum g_i^2 s_i / G^2.
 
     For BCM (beta_i = 1, a = 1) this is the posterior variance p / (1 + p G): the BCM is the
-    exact posterior. For the other aggregations it exceeds what their covariance reports
-    whenever that is not the exact one; it is the variance Lemma 1 needs for a bound on the
-    aggregate (:meth:`agents.state_space_dgpt.StateSpaceDGPT`'s UCB), where Theorem 2's
-    triangle inequality over the experts is loose by up to sqrt(M)."""
+    exact posterior. The other aggregations' errors are larger (the exact posterior mean has
+    the smallest error variance), and may be larger or smaller than the variance they report.
+    It is the variance Lemma 1 needs for a bound on the aggregate
+    (:class:`agents.state_space_dgpt.StateSpaceDGPT`'s UCB), where Theorem 2's triangle
+    inequality over the experts is loose by up to sqrt(M)."""
     prior_var = np.asarray(prior_var, dtype=float)
     noise_var = np.asarray(noise_var, dtype=float)
-    beta = expert_weights(method, prior_var, noise_var)
-    if noise_var.shape[-1] == 1:
-        beta = np.ones(beta.shape)
-    gain = beta / noise_var
+    gain, a = _fusion_weights(method, prior_var, noise_var)
     total_gain = gain.sum(axis=-1)
-    if method == "poe":
-        a = np.full(total_gain.shape, float(noise_var.shape[-1]))
-    elif method == "gpoe" and noise_var.shape[-1] > 1:
-        a = beta.sum(axis=-1)
-    else:
-        a = np.ones(total_gain.shape)
     scaled_prior = prior_var / a
     k = scaled_prior / (scaled_prior + 1.0 / total_gain)
     pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
