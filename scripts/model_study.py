@@ -18,6 +18,11 @@ without; compare step costs one episode at a time with ``scripts/bench.py``.
     python scripts/model_study.py --clutter-sensors all --candidates se-trend se-gate-4
     python scripts/model_study.py --clutter-sensors all --clutter-rates 1 --first-seed 0 \
         --seeds 100 --candidates se-trend gp hybrid     # held-out report
+    python scripts/model_study.py --ucb-by-step --seeds 4 --candidates ss-bcm-20
+
+``--ucb-by-step`` prints instead, per candidate over all its runs, the UCB half-width (median
+and mean over steps and axes), its coverage, the RMSE per axis and the predictive sigma on
+the steps where a sensor senses the target and on the coverage-gap steps (in one process).
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dgpt_gym.benchmark.sweep import RunUnit, run_units  # noqa: E402
+from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_units  # noqa: E402
 
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
@@ -164,7 +169,38 @@ def parse_args(argv):
         "--trajectories", nargs="+", choices=TRAJECTORIES, default=list(TRAJECTORIES)
     )
     parser.add_argument("--clutter-rates", nargs="+", type=float, default=list(CLUTTER_RATES))
+    parser.add_argument(
+        "--ucb-by-step",
+        action="store_true",
+        help="print the UCB on sensed and coverage-gap steps instead of the table",
+    )
     return parser.parse_args(argv)
+
+
+def print_ucb_by_step(units: list[RunUnit]) -> None:
+    """The UCB half-width, its coverage, the RMSE and sigma per axis on sensed and gap steps,
+    per candidate over all of its runs (steps before a track starts have no UCB and are left
+    out)."""
+    print("candidate        steps     share%  ucb_median  ucb_mean  ucb_cover%  rmse  sigma")
+    by_name = collections.defaultdict(list)
+    for block in make_blocks(units, 64):
+        by_name[block[0].tracker].extend(episode_results(block))
+    for name, results in by_name.items():
+        for kind in ("sensed", "gap"):
+            ucb, error, sigma = [], [], []
+            for result in results:
+                steps = (result.n_detecting > 0) == (kind == "sensed")
+                steps &= np.all(np.isfinite(result.ucb), axis=1)
+                ucb.append(result.ucb[steps].ravel())
+                error.append(np.abs(result.mean - result.truth)[steps].ravel())
+                sigma.append(np.sqrt(result.var[steps]).ravel())
+            ucb, error, sigma = map(np.concatenate, (ucb, error, sigma))
+            share = 100 * ucb.size / sum(result.ucb.size for result in results)
+            print(
+                f"{name:16s} {kind:7s} {share:8.1f} {np.median(ucb):11.1f} {ucb.mean():9.1f}"
+                f" {100 * np.mean(error <= ucb):11.2f} {np.sqrt(np.mean(error**2)):5.1f}"
+                f" {sigma.mean():6.1f}"
+            )
 
 
 def main(argv=None) -> int:
@@ -187,6 +223,9 @@ def main(argv=None) -> int:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 units.append(RunUnit(name, entry_point, kwargs, env, seed))
                 keys.append((name, *cell))
+    if args.ucb_by_step:
+        print_ucb_by_step(units)
+        return 0
     outcomes = run_units(units, workers=args.workers)
     by_cell = collections.defaultdict(list)
     for key, outcome in zip(keys, outcomes):
