@@ -19,8 +19,11 @@ without; compare step costs one episode at a time with ``scripts/bench.py``.
     python scripts/model_study.py --clutter-sensors all --clutter-rates 1 --first-seed 0 \
         --seeds 100 --candidates se-trend gp hybrid     # held-out report
     python scripts/model_study.py --ucb-by-step --seeds 4 --candidates ss-bcm-20
+    python scripts/model_study.py --paired-against ss-bcm-20 --candidates ss-bcm-20 ss-rbcm-20
 
-``--ucb-by-step`` prints instead, per candidate over all its runs, the UCB half-width (median
+``--paired-against NAME`` adds, per candidate and path mode, the mean over shared (cell,
+seed) pairs of the candidate's 2-D RMSE and NRMSE minus NAME's, with 95 % Student-t
+intervals. ``--ucb-by-step`` prints instead, per candidate over all its runs, the UCB half-width (median
 and mean over steps and axes), its coverage, the RMSE per axis and the predictive sigma on
 the steps where a sensor senses the target and on the coverage-gap steps (in one process).
 """
@@ -38,6 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
 from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_units  # noqa: E402
 
 CANDIDATES = {
@@ -170,11 +174,49 @@ def parse_args(argv):
     )
     parser.add_argument("--clutter-rates", nargs="+", type=float, default=list(CLUTTER_RATES))
     parser.add_argument(
+        "--paired-against",
+        metavar="NAME",
+        choices=sorted(CANDIDATES),
+        help="also print each candidate's paired difference to this one (which must be run)",
+    )
+    parser.add_argument(
         "--ucb-by-step",
         action="store_true",
         help="print the UCB on sensed and coverage-gap steps instead of the table",
     )
     return parser.parse_args(argv)
+
+
+def print_paired(runs: dict[tuple, dict], reference: str, trajectories) -> None:
+    """Per candidate and path mode, the mean of (candidate - ``reference``) 2-D RMSE (m) and
+    mean-over-axes NRMSE (percentage points) over the (cell, seed) pairs both ran, +- the
+    95 % Student-t half-width; ``runs`` maps (name, scenario, trajectory, clutter, seed) to
+    the run's metrics."""
+    print()
+    print(f"paired against {reference}: candidate - {reference}, mean +- 95 % interval")
+    print("candidate        paths    pairs  rmse_2d m           nrmse pp")
+    names = dict.fromkeys(key[0] for key in runs if key[0] != reference)
+    for name in names:
+        for trajectory in trajectories:
+            pairs = [
+                (metrics, runs[(reference, *key[1:])])
+                for key, metrics in runs.items()
+                if key[0] == name and key[2] == trajectory and (reference, *key[1:]) in runs
+            ]
+            if len(pairs) < 2:
+                continue
+            rmse = np.array([mine["rmse_2d"] - theirs["rmse_2d"] for mine, theirs in pairs])
+            nrmse = np.array(
+                [
+                    50 * (mine["nrmse_x"] + mine["nrmse_y"] - theirs["nrmse_x"] - theirs["nrmse_y"])
+                    for mine, theirs in pairs
+                ]
+            )
+            print(
+                f"{name:16s} {trajectory:8s} {len(pairs):5d}"
+                f"  {rmse.mean():+7.2f} +- {interval_half_width(rmse):5.2f}"
+                f"  {nrmse.mean():+7.3f} +- {interval_half_width(nrmse):5.3f}"
+            )
 
 
 def print_ucb_by_step(units: list[RunUnit]) -> None:
@@ -208,6 +250,9 @@ def main(argv=None) -> int:
     if args.seeds < 1:
         print("error: --seeds must be at least 1", file=sys.stderr)
         return 2
+    if args.paired_against and args.paired_against not in args.candidates:
+        print("error: --paired-against must name one of --candidates", file=sys.stderr)
+        return 2
     units, keys = [], []
     for name in args.candidates:
         entry_point, kwargs = CANDIDATES[name]
@@ -222,17 +267,18 @@ def main(argv=None) -> int:
             }
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 units.append(RunUnit(name, entry_point, kwargs, env, seed))
-                keys.append((name, *cell))
+                keys.append((name, *cell, seed))
     if args.ucb_by_step:
         print_ucb_by_step(units)
         return 0
     outcomes = run_units(units, workers=args.workers)
-    by_cell = collections.defaultdict(list)
+    by_cell, runs = collections.defaultdict(list), {}
     for key, outcome in zip(keys, outcomes):
         if outcome["status"] != "ok":
             print(f"failed {key}: {outcome['error']}", file=sys.stderr)
             continue
-        by_cell[key].append(outcome["metrics"])
+        by_cell[key[:-1]].append(outcome["metrics"])
+        runs[key] = outcome["metrics"]
 
     def mean(rows, key):
         return float(np.nanmean([row[key] for row in rows]))
@@ -281,6 +327,8 @@ def main(argv=None) -> int:
             f"{name:16s} {fixed:10.2f} {random:12.2f} {rest[0]:7.2f} {rest[1]:12.3f}"
             f" {rest[2]:10.2f} {rest[3]:7.1f} {rest[4]:5.2f} {rest[5]:9.2f}"
         )
+    if args.paired_against:
+        print_paired(runs, args.paired_against, args.trajectories)
     return 0
 
 

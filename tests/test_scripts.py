@@ -226,3 +226,37 @@ def test_the_paired_iqm_difference_pairs_the_seeds():
     np.testing.assert_allclose(exact, (5.0, 5.0, 5.0), rtol=0, atol=1e-9)
     noisy = module.paired_iqm_difference(np.stack([rule + 5.0 + rng.normal(size=100)] * 5), rule)
     assert noisy[1] < 5.0 < noisy[2] and noisy[2] - noisy[1] < 1.0
+
+
+def test_model_study_pairs_runs_by_cell_and_seed():
+    """With the same seeds in every cell, the mean of the paired differences equals the
+    difference of the candidates' mean RMSE (summary line, rounded to 0.01 m); the UCB
+    split covers every step that has a UCB; a reference that is not run is refused."""
+    common = ["--seeds", "2", "--trajectories", "fixed", "--clutter-rates", "1"]
+    result = run_script(
+        "model_study.py",
+        *common,
+        "--candidates",
+        "ss-bcm-20",
+        "ss-plain-bcm-50",
+        "--paired-against",
+        "ss-bcm-20",
+    )
+    assert result.returncode == 0, result.stderr
+    summary = {
+        line.split()[0]: float(line.split()[1])
+        for line in result.stdout.splitlines()
+        if re.match(r"ss-\S+\s+[\d.]+\s+nan", line)
+    }
+    paired = re.search(r"ss-plain-bcm-50\s+fixed\s+8\s+([+-][\d.]+) \+-", result.stdout)
+    assert paired, result.stdout
+    expected = summary["ss-plain-bcm-50"] - summary["ss-bcm-20"]
+    assert abs(float(paired.group(1)) - expected) <= 0.011
+    split = run_script("model_study.py", *common, "--ucb-by-step", "--candidates", "ss-bcm-20")
+    assert split.returncode == 0, split.stderr
+    shares = [float(line.split()[2]) for line in split.stdout.splitlines()[1:]]
+    assert len(shares) == 2 and 95.0 <= sum(shares) <= 100.0
+    refused = run_script(
+        "model_study.py", *common, "--candidates", "ss-bcm-20", "--paired-against", "se-trend"
+    )
+    assert refused.returncode == 2 and "--paired-against" in refused.stderr
