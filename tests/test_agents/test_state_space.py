@@ -5,6 +5,8 @@ likelihood, and the dense GP with the integrated Wiener-velocity kernel; then th
 built on it (agents/state_space_dgpt.py)."""
 
 import copy
+import importlib.util
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -33,6 +35,7 @@ from agents.state_space import (
 )
 from agents.state_space_dgpt import LOG_STEP, StateSpaceDGPT, newton_step
 from baselines.kalman import constant_velocity_model, kalman_predict
+from dgpt_gym.benchmark.episodes import run_episode
 
 seeds = st.integers(0, 2**32 - 1)
 
@@ -523,7 +526,7 @@ def test_lockstep_batch_equals_each_episode_alone():
     another window length, another manoeuvre component) on different seeds, stepped together
     by ``run_episodes``, give bit for bit the estimates, variances and UCBs of each episode
     run alone; and the learning did run in the batch."""
-    from dgpt_gym.benchmark.episodes import run_episode, run_episodes
+    from dgpt_gym.benchmark.episodes import run_episodes
 
     settings = [
         ({}, 0),
@@ -652,3 +655,24 @@ def test_window_steps_span_the_gaps_between_steps_with_data():
     assert [step.dt for step in tracker.steps_] == [0.0, 1.0, 1.0, 3.0]
     np.testing.assert_array_equal(tracker.steps_[-1].mean, after_two[0])
     np.testing.assert_array_equal(tracker.steps_[-1].cov, after_two[1])
+
+
+def test_q_identification_records_without_changing_the_tracker():
+    """scripts/q_identification.py's recording tracker gives the tracker's estimates, one
+    record per learning step, on the floor exactly where the tracker counts a fit on a
+    bound (q never reaches its upper bound here), and finite log likelihood ratios at every
+    q of its grid, per axis."""
+    path = Path(__file__).resolve().parents[2] / "scripts" / "q_identification.py"
+    spec_ = importlib.util.spec_from_file_location("q_identification", path)
+    module = importlib.util.module_from_spec(spec_)
+    spec_.loader.exec_module(module)
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
+    plain, recording = StateSpaceDGPT(), module.RecordingStateSpaceDGPT()
+    a, b = run_episode(env, plain, seed=1000), run_episode(env, recording, seed=1000)
+    np.testing.assert_array_equal(a.mean, b.mean)
+    assert len(recording.records_) == recording.fits_ > 50
+    on_floor = np.array([record[0] for record in recording.records_])
+    assert on_floor.any(axis=1).sum() == recording.fits_at_bound_
+    ratios = np.array([record[1] for record in recording.records_])
+    assert ratios.shape == (recording.fits_, len(module.Q_GRID), 2)
+    assert np.all(np.isfinite(ratios))
