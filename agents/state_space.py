@@ -236,7 +236,8 @@ def aggregate_error_var(method, prior_var, noise_var):
     the smallest error variance), and may be larger or smaller than the variance they report.
     It is the variance Lemma 1 needs for a bound on the aggregate
     (:class:`agents.state_space_dgpt.StateSpaceDGPT`'s UCB), where Theorem 2's triangle
-    inequality over the experts is loose by up to sqrt(M)."""
+    inequality over the experts is about sqrt(M) times wider with M experts of equal
+    variance."""
     prior_var = np.asarray(prior_var, dtype=float)
     noise_var = np.asarray(noise_var, dtype=float)
     gain, a = _fusion_weights(method, prior_var, noise_var)

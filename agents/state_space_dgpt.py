@@ -29,7 +29,8 @@ manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
    (:func:`agents.state_space.aggregate_error_var`; for BCM the posterior's) and the
    component's share of delta scaled by its weight, plus its distance to the estimate; the
    larger over the components. Theorem 2's form, which bounds every expert and adds the
-   bounds, ignores that the experts' errors share the prior's and is up to sqrt(M) wider.
+   bounds, ignores that the experts' errors share the prior's: about sqrt(M) times wider
+   with M experts of equal variance.
 5. **Learning**: q of each axis climbs the log marginal likelihood of the last C steps with
    data, re-filtered from the broadcast posterior before the oldest of them
    (:func:`agents.state_space.filter_window`): one Newton step in log q per step, from the

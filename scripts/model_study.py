@@ -23,9 +23,10 @@ without; compare step costs one episode at a time with ``scripts/bench.py``.
 
 ``--paired-against NAME`` adds, per candidate and path mode, the mean over shared (cell,
 seed) pairs of the candidate's 2-D RMSE and NRMSE minus NAME's, with 95 % Student-t
-intervals. ``--ucb-by-step`` prints instead, per candidate over all its runs, the UCB half-width (median
-and mean over steps and axes), its coverage, the RMSE per axis and the predictive sigma on
-the steps where a sensor senses the target and on the coverage-gap steps (in one process).
+intervals. ``--ucb-by-step`` prints instead, per candidate over all its runs, the UCB
+half-width (median and mean over steps and axes), its coverage, the RMSE per axis and the
+predictive sigma on the steps where a sensor senses the target and on the coverage-gap
+steps (in one process).
 """
 
 from __future__ import annotations
