@@ -1,5 +1,6 @@
 """The command-line scripts, run as a user runs them."""
 
+import csv
 import os
 import re
 import subprocess
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.rl.heuristics import HEURISTIC_GRIDS
 from dgpt_gym.benchmark.cli import with_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -260,3 +262,32 @@ def test_model_study_pairs_runs_by_cell_and_seed():
         "model_study.py", *common, "--candidates", "ss-bcm-20", "--paired-against", "se-trend"
     )
     assert refused.returncode == 2 and "--paired-against" in refused.stderr
+
+
+def test_sensors_training_table_runs_every_policy_on_training_seeds_only(tmp_path):
+    """--training-table: one CSV row per policy and training seed (1000 here; no evaluation
+    seed), every fixed count wakes exactly its n sensors per step, and every rule setting
+    of agents/rl/heuristics.py has its row."""
+    result = run_script(
+        "sensors_baselines.py",
+        "--training-table",
+        "--training-seeds",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+    )
+    assert result.returncode == 0, result.stderr
+    rows = list(csv.DictReader((tmp_path / "training_returns_v1.csv").open()))
+    assert {row["seed"] for row in rows} == {"1000"}
+    by_policy = {row["policy"]: row for row in rows}
+    assert len(by_policy) == len(rows)
+    nearest = {name: row for name, row in by_policy.items() if name.startswith("nearest ")}
+    assert len(nearest) >= 2 and "random" in by_policy
+    for name, row in nearest.items():
+        assert float(row["per_step"]) == int(name.split()[1])
+    n_rules = sum(len(grid) for grid in HEURISTIC_GRIDS.values())
+    rules = [name for name in by_policy if "(" in name]
+    assert len(rules) == n_rules
+    assert all(np.isfinite(float(row["return"])) for row in rows)
