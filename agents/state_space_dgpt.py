@@ -70,6 +70,13 @@ import numpy as np
 from agents import aggregation as agg
 from agents.gating import gate_measurements
 from agents.screening import ClutterScreen
+from agents.silence import (
+    draw_particles,
+    particle_moments,
+    propagate_particles,
+    resample_systematic,
+    silent_region,
+)
 from agents.state_space import (
     POOLED_METHODS,
     Manoeuvre,
@@ -165,6 +172,13 @@ class StateSpaceDGPT(TrackerBase):
         admission_probability: with ``clutter_sensors="all"`` only: a reporting sensor's
             measurements are used when its posterior probability of sensing the predicted
             target is at least this (:class:`agents.screening.ClutterScreen`; DGPT's 1/2).
+        silence_particles: 0 (the default) predicts through a coverage gap as the model
+            says; N >= 10 also conditions on the silence of every awake sensor (the target
+            is in no awake sensor's disc and inside the area) with N particles drawn from
+            the state at the gap's first step and collapsed to its moments at the next step
+            with data (:mod:`agents.silence`; seeded by ``reset(seed)``). The estimate and
+            variance in the gap are the particles' moments and the UCB is Lemma 1 on their
+            standard deviation.
     """
 
     name = "dgpt-bcm-ncv"
@@ -178,6 +192,7 @@ class StateSpaceDGPT(TrackerBase):
         manoeuvre_intensity: float = MANOEUVRE["intensity"],
         manoeuvre_probability: float = MANOEUVRE["probability"],
         admission_probability: float = 0.5,
+        silence_particles: int = 0,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.window = check_integer("window", window, low=1)
@@ -195,13 +210,19 @@ class StateSpaceDGPT(TrackerBase):
         self.admission_probability = check_real(
             "admission_probability", admission_probability, low=0.0, high=1.0, low_inclusive=False
         )
-        self.name = f"dgpt-{self.aggregation}-ncv"
+        self.silence_particles = check_integer("silence_particles", silence_particles, low=0)
+        if 0 < self.silence_particles < 10:
+            raise ValueError(
+                f"silence_particles must be 0 (off) or at least 10; got {silence_particles!r}"
+            )
+        self.name = f"dgpt-{self.aggregation}-ncv" + ("-silence" if self.silence_particles else "")
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
         self.noise_var_ = spec.model_noise_std**2
         self.log_q_ = np.full(2, np.log(PROCESS_NOISE_START))
         self.screen_ = ClutterScreen(spec, self.admission_probability)
+        self.rng_ = np.random.default_rng(seed)  # the gap particles' draws
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
@@ -221,6 +242,7 @@ class StateSpaceDGPT(TrackerBase):
         self.expert_covs_ = np.empty((2, 0, 2, 2))
         self.data_mean_ = self.data_cov_ = None  # broadcast posterior after the last data step
         self.data_step_ = 0
+        self.particles_ = None  # (states (N, 2, 2), weights (N,)) inside a coverage gap
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's learning steps that left q on a
@@ -269,6 +291,13 @@ class StateSpaceDGPT(TrackerBase):
         step = int(obs["t"])
         self.prior_state_ = self.next_state_
         mask = np.asarray(obs["mask"]).astype(bool)
+        if self.silence_particles and self.mean_ is not None:
+            if not mask.any():
+                self.last_estimate_ = self._silent_step(step, obs.get("awake"))
+                return None
+            if self.particles_ is not None:  # the gap ends: its particles become the state
+                self.mean_, self.cov_ = particle_moments(*self.particles_)
+                self.particles_ = None
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
         if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
@@ -340,6 +369,40 @@ class StateSpaceDGPT(TrackerBase):
         )
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
         return step, mean, cov, ucb
+
+    def _silent_step(self, step: int, awake) -> Estimate:
+        """A step on which no awake sensor reports (:mod:`agents.silence`): the gap's
+        particles carried to this step under the two-component process noise, weighted by
+        whether they lie where no awake sensor senses them, resampled when their effective
+        number falls below half; the estimate is their moments. If every particle lies in a
+        disc (the model cannot explain the silence), the weights are left as they were."""
+        spec = self.spec_
+        dt = (step - self.last_step_) * spec.dt
+        if self.particles_ is None:
+            states = draw_particles(self.mean_, self.cov_, self.silence_particles, self.rng_)
+            weights = np.full(self.silence_particles, 1.0 / self.silence_particles)
+        else:
+            states, weights = self.particles_
+        intensity, probability = (
+            (self.manoeuvre.intensity, self.manoeuvre.probability) if self.manoeuvre else (0, 0)
+        )
+        states = propagate_particles(
+            states, dt, np.exp(self.log_q_), intensity, probability, self.rng_
+        )
+        sensor_positions = np.asarray(spec.sensor_positions)
+        if awake is not None:
+            sensor_positions = sensor_positions[np.asarray(awake, dtype=bool)]
+        silent = silent_region(states[..., 0], sensor_positions, spec.sensing_range, spec.area)
+        if np.any(silent & (weights > 0)):
+            weights = weights * silent
+            weights = weights / weights.sum()
+        if 1.0 / np.sum(weights**2) < weights.size / 2:
+            states = states[resample_systematic(weights, self.rng_)]
+            weights = np.full(weights.size, 1.0 / weights.size)
+        self.particles_ = (states, weights)
+        mean, cov = particle_moments(states, weights)
+        ucb = np.sqrt(agg.gamma_one_step(1, self.delta) * cov[:, 0, 0])
+        return self._keep(step, mean, cov, ucb)
 
     def _ready_to_learn(self) -> bool:
         """Whether the window holds the three summaries a Newton step needs."""

@@ -113,6 +113,10 @@ CANDIDATES = {
         )
     },
     **{
+        f"ss-silence-{n}": ("agents.state_space_dgpt:StateSpaceDGPT", {"silence_particles": n})
+        for n in (200, 500, 1000)
+    },
+    **{
         f"ss-plain-bcm-{window}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": "bcm", "window": window, "manoeuvre_intensity": 0.0},
@@ -126,7 +130,9 @@ paper's zero mean with and without bounds, and the NCV kernel with every expert'
 integrated out (distributed with BCM / RBCM, and centralized), and the NCV GP in state-space
 form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`:
 ``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-manoeuvre-<q_m>-<p>`` with other
-manoeuvre settings, ``ss-plain-bcm-<C>`` without; q learnt over the last C steps with data)."""
+manoeuvre settings, ``ss-plain-bcm-<C>`` without, ``ss-silence-<N>`` conditioned in coverage
+gaps on the silence of the sensors with N particles; q learnt over the last C steps with
+data)."""
 
 DEFAULT_CANDIDATES = (
     "se-trend",

@@ -32,7 +32,7 @@ FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
     ("clairvoyant", "imm-pda", "pda")
     + PAPER_GP_TRACKERS
-    + ("dgpt-bcm-ncv", "hybrid", "hybrid-paper", "hybrid-ncv", "cpf")
+    + ("dgpt-bcm-ncv", "dgpt-bcm-ncv-silence", "hybrid", "hybrid-paper", "hybrid-ncv", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
 
@@ -132,14 +132,17 @@ def consistency_markdown(summaries: list[dict]) -> str:
             loss = 100 * float(np.mean([_value(row, "track_loss_rate") for row in mine]))
             lines.append(
                 f"| {tracker if part == 'detected' else ''} | {part} | {mean('anees'):.2f} | "
-                f"{mean('nees_median'):.2f} | " + " | ".join(coverage)
+                f"{mean('nees_median'):.2f} | "
+                + " | ".join(coverage)
                 + f" | {f'{loss:.1f}' if part == 'detected' else ''} |"
             )
     return "\n".join(lines + [""])
 
 
 def paired_markdown(
-    per_run: dict[tuple, dict[int, float]], noise_std: float = 1.0, reference: str = PAIRED_REFERENCE
+    per_run: dict[tuple, dict[int, float]],
+    noise_std: float = 1.0,
+    reference: str = PAIRED_REFERENCE,
 ) -> str:
     """Paired comparison with ``reference`` at ``noise_std``: per tracker and (scenario,
     clutter rate), the mean over shared seeds of (tracker - reference) mean-over-axes NRMSE,

@@ -59,7 +59,6 @@ DEFAULT_BATCH_SIZE = 50
 per episode in blocks of 10, 25, 50 and 100, against 0.25 s alone)."""
 
 
-
 @dataclass(frozen=True)
 class RunUnit:
     """One episode: a tracker (id, entry point, full constructor arguments), the
@@ -162,7 +161,7 @@ GP-based tracker of the ``--paper`` grid), so that the main command shows them."
 
 PAPER_SWEEP = (
     Grid(
-        trackers=PAPER_GP_TRACKERS + ("dgpt-bcm-ncv",) + STANDARD_TRACKERS,
+        trackers=PAPER_GP_TRACKERS + ("dgpt-bcm-ncv", "dgpt-bcm-ncv-silence") + STANDARD_TRACKERS,
         noise_levels=(1.0, 2.0, 4.0),
         runs=100,
     ),
@@ -175,8 +174,9 @@ PAPER_SWEEP = (
     ),
 )
 """``--paper``: Tables II-IX (six GP trackers, sigma_z in {1, 2, 4}, clutter 1 and 5) with
-the NCV GP in state-space form (``dgpt-bcm-ncv``), the standard trackers and the clairvoyant
-floor on every cell; the paper's model as
+the NCV GP in state-space form (``dgpt-bcm-ncv``, and ``dgpt-bcm-ncv-silence``, which
+also uses the silence of the sensors in coverage gaps), the standard trackers and the
+clairvoyant floor on every cell; the paper's model as
 printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter in
 both variants, the hybrid around ``dgpt-bcm-ncv`` and the CPF at sigma_z = 1 and both clutter
 rates (Fig. 8 is the clutter-5
