@@ -20,8 +20,8 @@ SILENCE_PARTICLES = 1000
 """Particles of ``dgpt-bcm-ncv-silence`` in a coverage gap: of 200, 500 and 1000 on training
 seeds 1000-1011 (``python scripts/model_study.py --seeds 12 --paired-against ss-bcm-20
 --candidates ss-bcm-20 ss-silence-200 ss-silence-500 ss-silence-1000``), 1000 had the lowest
-RMSE (13.00 / 19.20 m on the reference / random paths, against 13.42 / 19.24 m for 500 and
-14.40 / 23.09 m without the silence)."""
+RMSE (13.30 / 19.50 m on the reference / random paths, against 13.40 / 19.61 m for 500,
+13.87 / 19.87 m for 200 and 14.40 / 23.09 m without the silence)."""
 
 TRACKERS: tuple[tuple[str, str, dict], ...] = (
     *(
