@@ -518,7 +518,12 @@ def test_the_clairvoyant_floor_is_below_every_registered_tracker(scenario):
 
     On the steps where some sensor senses the target, the floor holds per seed with a
     margin: the clairvoyant's RMSE times 1.5 is below every other tracker's (measured
-    smallest ratio 1.92, imm-pda on S4)."""
+    smallest ratio 1.92, imm-pda on S4).
+
+    The floor does not use the silence of the sensors in coverage gaps (the target is in no
+    awake sensor's disc), so a tracker that does (``silence_particles``, e.g.
+    ``dgpt-bcm-ncv-silence``) is held to the detected-step floor only: over the episode it
+    beats the floor on S4 (5.99 against 6.51 m on these seeds)."""
     def run(tracker_id):
         envs = [gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=1.0) for _ in FLOOR_SEEDS]
         kwargs = tuned_kwargs(tracker_id, scenario)
@@ -538,7 +543,8 @@ def test_the_clairvoyant_floor_is_below_every_registered_tracker(scenario):
     assert "centroid" in others and "pda" in others and "imm-pda" in others
     for tracker_id in others:
         episode, detected = run(tracker_id)
-        assert floor_episode.mean() < episode.mean(), (tracker_id, floor_episode, episode)
+        if not getattr(make_tracker(tracker_id), "silence_particles", 0):
+            assert floor_episode.mean() < episode.mean(), (tracker_id, floor_episode, episode)
         assert np.all(1.5 * floor_detected < detected), (tracker_id, floor_detected, detected)
 
 
