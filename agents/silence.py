@@ -11,7 +11,8 @@ straight 9-step gap drifted 190 m), so the gap is filtered by particles drawn fr
 state at its first step and collapsed back to a Gaussian at the next step with data.
 
 Pure functions on particle arrays: states (N, 2 axes, 2) = [position, velocity] per axis,
-weights (N,) summing to one.
+weights (N,) summing to one; resampling and the kernel bandwidth are
+:mod:`agents.particles`'.
 """
 
 from __future__ import annotations
@@ -19,14 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import spatial
 
-__all__ = [
-    "draw_particles",
-    "kernel_scale",
-    "propagate_particles",
-    "silent_region",
-    "particle_moments",
-    "resample_systematic",
-]
+__all__ = ["draw_particles", "propagate_particles", "silent_region", "particle_moments"]
 
 
 def draw_particles(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Generator):
@@ -82,18 +76,3 @@ def particle_moments(states: np.ndarray, weights: np.ndarray):
     mean = np.einsum("n,nai->ai", weights, states)
     deviation = states - mean
     return mean, np.einsum("n,nai,naj->aij", weights, deviation, deviation)
-
-
-def kernel_scale(n: int, dimension: int = 4) -> float:
-    """h^2 of Silverman's rule for a Gaussian kernel density of ``n`` particles in
-    ``dimension`` dimensions, h = (4 / (n (d + 2)))^(1 / (d + 4)): the kernels' covariance is
-    h^2 times the particles' (Musso, Oudjane & Le Gland 2001, the regularized particle
-    filter). The state [x, vx, y, vy] has d = 4; n = 1000 gives 0.16."""
-    return (4.0 / (n * (dimension + 2.0))) ** (2.0 / (dimension + 4.0))
-
-
-def resample_systematic(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Indices (N,) of systematic resampling (one uniform draw; Douc, Cappe & Moulines 2005)."""
-    n = weights.size
-    positions = (rng.random() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(np.cumsum(weights), positions), n - 1)

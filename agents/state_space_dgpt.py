@@ -69,15 +69,9 @@ import numpy as np
 
 from agents import aggregation as agg
 from agents.gating import gate_measurements
+from agents.particles import kernel_scale, resample_systematic
 from agents.screening import ClutterScreen
-from agents.silence import (
-    draw_particles,
-    kernel_scale,
-    particle_moments,
-    propagate_particles,
-    resample_systematic,
-    silent_region,
-)
+from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
     POOLED_METHODS,
     Manoeuvre,
@@ -176,10 +170,10 @@ class StateSpaceDGPT(TrackerBase):
         silence_particles: 0 (the default) predicts through a coverage gap as the model
             says; N >= 10 also conditions on the silence of every awake sensor (the target
             is in no awake sensor's disc and inside the area) with N particles drawn from
-            the state at the gap's first step and collapsed to its moments at the next step
+            the state at the gap's first step and collapsed to their moments at the next step
             with data (:mod:`agents.silence`; seeded by ``reset(seed)``). The estimate and
-            variance in the gap are the particles' moments and the UCB is Lemma 1 on their
-            standard deviation.
+            variance in the gap are the moments of the particles' kernel density
+            (:meth:`_silent_step`) and the UCB is Lemma 1 on its standard deviation.
     """
 
     name = "dgpt-bcm-ncv"
@@ -374,7 +368,7 @@ class StateSpaceDGPT(TrackerBase):
         particles carried to this step under the two-component process noise, weighted by
         whether they lie where no awake sensor senses them, and resampled when their
         effective number falls below half. The estimate is the moments of their kernel
-        density: Gaussian kernels of covariance :func:`agents.silence.kernel_scale` times
+        density: Gaussian kernels of covariance :func:`agents.particles.kernel_scale` times
         the predicted particles' covariance (Silverman's bandwidth), so that a few surviving
         particles do not report a variance near zero. The resampled particles are not
         jittered with those kernels: on training seeds 1000-1011 that drifted tracks (RMSE

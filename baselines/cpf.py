@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from agents.likelihood import PoissonLikelihood, measurement_chunks, squared_distances
+from agents.particles import resample_systematic
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_integer, check_real
@@ -217,8 +218,7 @@ class MultipleModelCPF(TrackerBase):
     def _resample(self, weights: np.ndarray) -> None:
         """Systematic resampling followed by the Gaussian convolution kernel."""
         n, rng = self.n_particles, self.rng_
-        positions = (rng.random() + np.arange(n)) / n
-        index = np.minimum(np.searchsorted(np.cumsum(weights), positions), n - 1)
+        index = resample_systematic(weights, rng)
         mean = weights @ self.particles_
         centred = self.particles_ - mean
         covariance = (weights[:, None] * centred).T @ centred

@@ -9,14 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import dgpt_gym  # noqa: F401  (registers the environment)
-from agents.silence import (
-    draw_particles,
-    kernel_scale,
-    particle_moments,
-    propagate_particles,
-    resample_systematic,
-    silent_region,
-)
+from agents.particles import kernel_scale, resample_systematic
+from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import ncv_predict
 from agents.state_space_dgpt import StateSpaceDGPT
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
