@@ -31,14 +31,15 @@ manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
    larger over the components. Theorem 2's form, which bounds every expert and adds the
    bounds, ignores that the experts' errors share the prior's: about sqrt(M) times wider
    with M experts of equal variance.
-5. **Learning**: q of each axis climbs the log marginal likelihood of the last C steps with
-   data, re-filtered from the broadcast posterior before the oldest of them
-   (:func:`agents.state_space.filter_window`): one Newton step in log q per step, from the
-   likelihood at q e^(-h), q, q e^h, warm-started from the last step's q (Sec. IV-D: few
-   iterations, warm-started). Steps 1-4 use q before this step's update. With BCM and PoE
-   the window is filtered from each step's pooled sums
-   (:class:`agents.state_space.PooledSummaries`, formed once when the step is taken), and
-   many episodes in lockstep are filtered together (:meth:`StateSpaceDGPT.update_batch`).
+5. **Learning**: q of each axis climbs the exact log marginal likelihood of the last C
+   steps with data, re-filtered from the broadcast posterior before the oldest of them
+   with the exact (BCM) update whatever the tracker's aggregation
+   (:data:`LEARNING_FILTER`): one Newton step in log q per step, from the likelihood at
+   q e^(-h), q, q e^h, warm-started from the last step's q (Sec. IV-D: few iterations,
+   warm-started). Steps 1-4 use q before this step's update. The window is filtered from
+   each step's network-wide sums (:class:`agents.state_space.PooledSummaries`, formed once
+   when the step is taken), and many episodes in lockstep are filtered together
+   (:meth:`StateSpaceDGPT.update_batch`).
 
 An expert's local posterior depends on its own summary and the broadcast prior only, and
 the prior carries the earlier steps exactly because the NCV GP is Markov in its state; with
@@ -73,7 +74,6 @@ from agents.particles import kernel_scale, resample_systematic
 from agents.screening import ClutterScreen
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
-    POOLED_METHODS,
     Manoeuvre,
     PooledSummaries,
     WindowStep,
@@ -81,7 +81,6 @@ from agents.state_space import (
     condition_on_position,
     expert_posteriors,
     filter_steps,
-    filter_window,
     fused_update,
     ncv_predict,
     pool_summaries,
@@ -127,6 +126,16 @@ LOG_STEP = 0.05
 
 MAX_LOG_STEP = 1.0
 """The largest change of log q in one step."""
+
+LEARNING_FILTER = "bcm"
+"""The aggregation that filters the learning window, whatever the tracker's: BCM's aggregate
+is the exact posterior, so the window's likelihood is the model's marginal likelihood of the
+summaries, which q is meant to maximise; the tracker's own aggregation only makes the
+estimate. It needs only the network-wide sums of each step
+(:class:`agents.state_space.PooledSummaries`), so every tracker's window is filtered in
+lockstep with the others'. Against each aggregation's own filter on training seeds 1000-1003
+(``python scripts/model_study.py --seeds 4 --candidates ss-rbcm-20 ss-gpoe-20``): see
+docs/analysis.md."""
 
 _BOUND_TOLERANCE = 1e-6
 
@@ -176,7 +185,7 @@ class StateSpaceDGPT(TrackerBase):
             (:meth:`_silent_step`) and the UCB is Lemma 1 on its standard deviation.
     """
 
-    name = "dgpt-bcm-ncv"
+    name = "dgpt-bcm"
 
     def __init__(
         self,
@@ -210,7 +219,7 @@ class StateSpaceDGPT(TrackerBase):
             raise ValueError(
                 f"silence_particles must be 0 (off) or at least 10; got {silence_particles!r}"
             )
-        self.name = f"dgpt-{self.aggregation}-ncv" + ("-silence" if self.silence_particles else "")
+        self.name = f"dgpt-{self.aggregation}" + ("-silence" if self.silence_particles else "")
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
@@ -228,7 +237,7 @@ class StateSpaceDGPT(TrackerBase):
     def _start_track(self) -> None:
         """Forget the track (not the learnt q): the next measurements start a new one."""
         self.steps_: deque[WindowStep] = deque(maxlen=self.window)
-        self.pooled_: deque[PooledSummaries] = deque(maxlen=self.window)  # BCM, PoE
+        self.pooled_: deque[PooledSummaries] = deque(maxlen=self.window)
         self.mean_: np.ndarray | None = None  # (2 axes, 2) broadcast posterior at last_step_
         self.cov_: np.ndarray | None = None  # (2, 2, 2)
         self.last_step_ = 0
@@ -257,18 +266,15 @@ class StateSpaceDGPT(TrackerBase):
         cls, trackers: Sequence[StateSpaceDGPT], observations: Sequence[dict]
     ) -> list[Estimate]:
         """One step of many episodes in lockstep: each tracker's steps 1-4 alone, then the
-        learning of every tracker that learns at this step, the BCM and PoE windows
-        filtered together (:func:`agents.state_space.filter_steps`); the numbers equal the
-        one-by-one ones, since :meth:`update` is this with one tracker."""
+        learning of every tracker that learns at this step, their windows filtered together
+        (:func:`agents.state_space.filter_steps`); the numbers equal the one-by-one ones,
+        since :meth:`update` is this with one tracker."""
         pending = [tracker._observe(obs) for tracker, obs in zip(trackers, observations)]
         learners = [tracker for tracker, step in zip(trackers, pending) if step is not None]
         learners = [tracker for tracker in learners if tracker._ready_to_learn()]
-        groups: dict[tuple, list[StateSpaceDGPT]] = {}
+        groups: dict[Manoeuvre | None, list[StateSpaceDGPT]] = {}
         for tracker in learners:
-            if tracker.aggregation in POOLED_METHODS:
-                groups.setdefault((tracker.aggregation, tracker.manoeuvre), []).append(tracker)
-            else:
-                tracker._learn()
+            groups.setdefault(tracker.manoeuvre, []).append(tracker)
         for group in groups.values():
             _learn_pooled(group)
         return [
@@ -349,9 +355,8 @@ class StateSpaceDGPT(TrackerBase):
             self.data_cov_,
         )
         self.steps_.append(window_step)
-        if self.aggregation in POOLED_METHODS:
-            summary_var = np.full(2, self.noise_var_)[:, None] + window_step.spread
-            self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
+        summary_var = np.full(2, self.noise_var_)[:, None] + window_step.spread
+        self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
         self.expert_sensors_ = best["gated"].sensors
         self.expert_means_, self.expert_covs_ = best["experts"]
         ucb = agg.mixture_half_width(
@@ -372,7 +377,7 @@ class StateSpaceDGPT(TrackerBase):
         the predicted particles' covariance (Silverman's bandwidth), so that a few surviving
         particles do not report a variance near zero. The resampled particles are not
         jittered with those kernels: on training seeds 1000-1011 that drifted tracks (RMSE
-        on the reference paths 2.15 m above dgpt-bcm-ncv's, against 1.10 m below without
+        on the reference paths 2.15 m above dgpt-bcm's, against 1.10 m below without
         the jitter). If every particle lies in a disc (the model cannot explain the
         silence), the weights are left as they were."""
         spec = self.spec_
@@ -437,18 +442,6 @@ class StateSpaceDGPT(TrackerBase):
             ),
         }
 
-    def _learn(self) -> None:
-        """Step 5 alone: one Newton step of log q per axis on the window's log likelihood at
-        log q, log q + h and log q - h."""
-        log_likelihood, _, _ = filter_window(
-            self.aggregation,
-            list(self.steps_),
-            np.exp(self.log_q_ + _TRIAL_OFFSETS[:, None]),
-            np.full(2, self.noise_var_),
-            self.manoeuvre,
-        )
-        self._climb(log_likelihood)
-
     def _climb(self, log_likelihood: np.ndarray) -> None:
         """Move log q by the Newton step of the window likelihoods (3, 2) at the trial
         points, within :data:`PROCESS_NOISE_BOUNDS`, and count whether it ends on a bound."""
@@ -495,9 +488,10 @@ class StateSpaceDGPT(TrackerBase):
 
 
 def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
-    """Step 5 of BCM or PoE trackers that share the aggregation and the manoeuvre
-    component: their windows, padded at the front to the longest, filtered together from
-    their pooled sums at (episode, trial point, axis)."""
+    """Step 5 of trackers that share the manoeuvre component: one Newton step of log q per
+    axis on each window's exact log likelihood at log q, log q + h and log q - h, the
+    windows padded at the front to the longest and filtered together from their pooled sums
+    at (episode, trial point, axis) with :data:`LEARNING_FILTER`."""
     first = trackers[0]
     length = max(len(tracker.steps_) for tracker in trackers)
     # (step, tracker, field, axis), padded at the front with zero sums that are skipped
@@ -515,7 +509,7 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     ]
     log_q = np.stack([tracker.log_q_ for tracker in trackers])
     log_likelihood, _, _ = filter_steps(
-        first.aggregation,
+        LEARNING_FILTER,
         steps,
         np.stack([tracker.steps_[0].mean for tracker in trackers])[:, None],
         np.stack([tracker.steps_[0].cov for tracker in trackers])[:, None],
