@@ -262,7 +262,7 @@ class HybridFilter(TrackerBase):
         delta: float = 0.003,
         prune_tolerance: float = 1e-9,
         reacquire: str = "none",
-        gp: str = "se",
+        gp: str = "ncv",
         scan_model: str = "per-sensor",
         **dgpt_kwargs,
     ) -> None:

@@ -4,9 +4,9 @@ when one is built. A new tracker in ``agents/`` is registered here and nowhere e
 
 from __future__ import annotations
 
-from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, tracker_id
+from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, TREND_SUFFIX, tracker_id
 
-__all__ = ["TRACKERS", "PAPER_MODEL", "SILENCE_PARTICLES"]
+__all__ = ["TRACKERS", "PAPER_MODEL", "SILENCE_PARTICLES", "RENAMED"]
 
 PAPER_MODEL = {"mean": "zero"}
 """The paper's GP model as printed: zero prior mean on raw coordinates, with the SE kernel,
@@ -23,14 +23,29 @@ seeds 1000-1011 (``python scripts/model_study.py --seeds 12 --paired-against ss-
 RMSE (13.30 / 19.50 m on the reference / random paths, against 13.40 / 19.61 m for 500,
 13.87 / 19.87 m for 200 and 14.40 / 23.09 m without the silence)."""
 
+AGGREGATIONS = ("rbcm", "gpoe", "bcm", "poe")
+
 TRACKERS: tuple[tuple[str, str, dict], ...] = (
     *(
         (
-            tracker_id(f"dgpt-{aggregation}", inputs),
+            f"dgpt-{aggregation}",
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": aggregation},
+        )
+        for aggregation in AGGREGATIONS
+    ),
+    (
+        "dgpt-bcm-silence",
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "bcm", "silence_particles": SILENCE_PARTICLES},
+    ),
+    *(
+        (
+            tracker_id(f"dgpt-{aggregation}", inputs, TREND_SUFFIX),
             "agents.dgpt:DGPT",
             {"aggregation": aggregation, "inputs": inputs},
         )
-        for aggregation in ("rbcm", "gpoe", "bcm", "poe")
+        for aggregation in AGGREGATIONS
         for inputs in INPUTS
     ),
     *(
@@ -42,21 +57,30 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
         for aggregation in ("rbcm", "gpoe")
         for inputs in INPUTS
     ),
-    *(
-        (
-            f"dgpt-{aggregation}-ncv",
-            "agents.state_space_dgpt:StateSpaceDGPT",
-            {"aggregation": aggregation},
-        )
-        for aggregation in ("bcm", "rbcm")
-    ),
-    (
-        "dgpt-bcm-ncv-silence",
-        "agents.state_space_dgpt:StateSpaceDGPT",
-        {"aggregation": "bcm", "silence_particles": SILENCE_PARTICLES},
-    ),
-    ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact"}),
-    ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper"}),
-    ("hybrid-ncv", "agents.hybrid:HybridFilter", {"variant": "exact", "gp": "ncv"}),
+    ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact", "aggregation": "rbcm"}),
+    ("hybrid" + TREND_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "exact", "gp": "se"}),
+    ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper", "gp": "se"}),
 )
-"""``(id, "module:Class", default keyword arguments)`` of every tracker in ``agents/``."""
+"""``(id, "module:Class", default keyword arguments)`` of every tracker in ``agents/``: the
+distributed NCV GP in state-space form (``dgpt-<aggregation>``, the default), the same with
+the silence of the sensors in coverage gaps (``dgpt-bcm-silence``), the SE kernel around a
+pooled trend (``-trend``) and the paper's model as printed (``-paper``), with temporal and
+spatio-temporal (``-stgp``) inputs, and the hybrid Bayesian filter around each."""
+
+RENAMED = {
+    "dgpt-bcm-ncv": "dgpt-bcm",
+    "dgpt-rbcm-ncv": "dgpt-rbcm",
+    "dgpt-bcm-ncv-silence": "dgpt-bcm-silence",
+    "hybrid-ncv": "hybrid (now around dgpt-rbcm; around dgpt-bcm: aggregation='bcm')",
+    **{
+        tracker_id(approach, inputs): tracker_id(approach, inputs, TREND_SUFFIX)
+        for approach in ("gp", *(f"dgpt-{a}" for a in AGGREGATIONS))
+        for inputs in INPUTS
+        if inputs == "stgp"
+    },
+}
+"""Ids of dgpt-gym 0.8 that 0.9.0 renamed, and their new names: the state-space NCV GP
+became the default ``dgpt-*`` and ``gp``, the pooled SE trend took ``-trend``. The SE ids
+with temporal inputs (``dgpt-rbcm``, ``gp``, ...) now name the state-space trackers, and
+their 0.8 trackers are ``dgpt-rbcm-trend``, ``gp-trend``, ...; ``hybrid`` is
+``hybrid-trend``."""

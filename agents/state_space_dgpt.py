@@ -134,8 +134,10 @@ summaries, which q is meant to maximise; the tracker's own aggregation only make
 estimate. It needs only the network-wide sums of each step
 (:class:`agents.state_space.PooledSummaries`), so every tracker's window is filtered in
 lockstep with the others'. Against each aggregation's own filter on training seeds 1000-1003
-(``python scripts/model_study.py --seeds 4 --candidates ss-rbcm-20 ss-gpoe-20``): see
-docs/analysis.md."""
+(``python scripts/model_study.py --seeds 4 --candidates ss-rbcm-20 ss-gpoe-20 ss-poe-20``,
+RMSE on the reference / random paths): RBCM 13.84 / 23.19 m with either, GPoE 13.78 / 23.08
+against 13.78 / 23.11 m, PoE 13.99 / 23.55 against 13.98 / 23.56 m; the share of learning
+steps on a bound rose for GPoE (76 to 91 %) and PoE (83 to 90 %) to BCM's and RBCM's 92 %."""
 
 _BOUND_TOLERANCE = 1e-6
 

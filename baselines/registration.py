@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from agents.registration import PAPER_MODEL
-from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, tracker_id
+from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, TREND_SUFFIX, tracker_id
 
 __all__ = ["TRACKERS"]
 
 TRACKERS: tuple[tuple[str, str, dict], ...] = (
     ("centroid", "baselines.centroid:GatedCentroidTracker", {}),
+    ("gp", "baselines.standard_gp:StateSpaceGP", {}),
     *(
-        (tracker_id("gp", inputs), "baselines.standard_gp:StandardGP", {"inputs": inputs})
+        (
+            tracker_id("gp", inputs, TREND_SUFFIX),
+            "baselines.standard_gp:StandardGP",
+            {"inputs": inputs},
+        )
         for inputs in INPUTS
     ),
     *(

@@ -40,6 +40,10 @@ ENTRY_POINT_GROUP = "dgpt_gym.trackers"
 BUILTIN_TRACKER_TABLES = ("agents.registration:TRACKERS", "baselines.registration:TRACKERS")
 """Where the project's trackers are declared: tuples ``(id, "module:Class", kwargs)``."""
 
+RENAMED_TABLE = "agents.registration:RENAMED"
+"""Ids that earlier versions used, ``{old id: new id}``: asked for one, the registry says
+what it is called now."""
+
 
 def load_table(location: str):
     """The object at ``location`` (``"package.module:NAME"``), imported on demand: how
@@ -121,6 +125,11 @@ def tracker_spec(id: str) -> TrackerSpec:
     try:
         return _REGISTRY[id]
     except (KeyError, TypeError):
+        renamed = load_table(RENAMED_TABLE) if isinstance(id, str) else {}
+        if id in renamed:
+            raise ValueError(
+                f"tracker {id!r} was renamed in dgpt-gym 0.9.0: use {renamed[id]}"
+            ) from None
         raise ValueError(
             f"tracker must be one of {tracker_ids()} or 'package.module:ClassName'; got {id!r}"
         ) from None

@@ -48,21 +48,24 @@ from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp": ("baselines.standard_gp:StandardGP", {"window": 3}),
-    "hybrid": ("agents.hybrid:HybridFilter", {"window": 3}),
+    "hybrid": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     "hybrid-ncv-per-sensor": (
         "agents.hybrid:HybridFilter",
         {"gp": "ncv", "scan_model": "per-sensor"},
     ),
-    "hybrid-per-sensor": ("agents.hybrid:HybridFilter", {"window": 3, "scan_model": "per-sensor"}),
+    "hybrid-per-sensor": (
+        "agents.hybrid:HybridFilter",
+        {"gp": "se", "window": 3, "scan_model": "per-sensor"},
+    ),
     "hybrid-ncv-per-sensor-reacquire-none": (
         "agents.hybrid:HybridFilter",
         {"gp": "ncv", "scan_model": "per-sensor", "reacquire": "none"},
     ),
     "hybrid-per-sensor-reacquire-none": (
         "agents.hybrid:HybridFilter",
-        {"window": 3, "scan_model": "per-sensor", "reacquire": "none"},
+        {"gp": "se", "window": 3, "scan_model": "per-sensor", "reacquire": "none"},
     ),
     # references, not GP models: the accuracy floor and the strongest standard tracker
     "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),

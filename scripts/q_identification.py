@@ -1,4 +1,4 @@
-"""Does the window identify the process noise q of ``dgpt-bcm-ncv`` when q ends on its floor?
+"""Does the window identify the process noise q of ``dgpt-bcm`` when q ends on its floor?
 
 At every learning step of the NCV GP in state-space form (:mod:`agents.state_space_dgpt`),
 the last C steps' exact log marginal likelihood is evaluated again at a grid of q (per axis)
@@ -41,7 +41,7 @@ the floor clearly."""
 
 
 class RecordingStateSpaceDGPT(StateSpaceDGPT):
-    """``dgpt-bcm-ncv`` that, after each learning step, records per axis whether q ended on
+    """``dgpt-bcm`` that, after each learning step, records per axis whether q ended on
     its floor and the window's log likelihood at the floor and at :data:`Q_GRID`; its
     estimates are the tracker's."""
 

@@ -63,14 +63,16 @@ def test_evaluate_help_documents_every_option():
 
 
 def test_evaluate_inputs_expand_gp_trackers_and_keep_the_others():
-    assert with_inputs(["gp", "imm-pda", "dgpt-rbcm-stgp"], ["tgp", "stgp"]) == [
-        "gp",
-        "gp-stgp",
+    assert with_inputs(["gp-trend", "imm-pda", "dgpt-rbcm-stgp-trend"], ["tgp", "stgp"]) == [
+        "gp-trend",
+        "gp-stgp-trend",
         "imm-pda",
-        "dgpt-rbcm",
-        "dgpt-rbcm-stgp",
+        "dgpt-rbcm-trend",
+        "dgpt-rbcm-stgp-trend",
     ]
-    assert with_inputs(["cpf", "gp"], ["stgp"]) == ["cpf", "gp-stgp"]
+    assert with_inputs(["cpf", "gp-trend"], ["stgp"]) == ["cpf", "gp-stgp-trend"]
+    # the state-space trackers have temporal inputs only
+    assert with_inputs(["gp", "dgpt-rbcm"], ["tgp", "stgp"]) == ["gp", "dgpt-rbcm"]
 
 
 def test_evaluate_rejects_unknown_names_with_the_valid_ones():
@@ -98,8 +100,9 @@ def test_bench_prints_its_figures():
     assert result.returncode == 0, result.stderr
     ratio = re.search(r"ratio DGPTrack / CartPole \(goal <= 3\): ([\d.]+)", result.stdout)
     assert ratio and float(ratio.group(1)) > 0
-    step = re.search(r"DGPT-RBCM step, median \(ms, goal <= 0.5\): ([\d.]+)", result.stdout)
-    assert step and float(step.group(1)) > 0
+    for label in (r"dgpt-rbcm", r"dgpt-rbcm-trend \(window 10\)"):
+        step = re.search(label + r" step, median \(ms, goal <= 1\): ([\d.]+)", result.stdout)
+        assert step and float(step.group(1)) > 0
 
 
 def test_train_rl_trains_saves_and_compares(tmp_path):

@@ -60,7 +60,7 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         "sensors-v2",
         "sensors woken per step",
         "agents.rl.vector:sensors_v1_vector_env",
-        (("tracker", "dgpt-bcm-ncv"), ("window", 20)),
+        (("tracker", "dgpt-bcm"), ("window", 20)),
     ),
 )
 """Every RL environment in ``agents/rl/``."""

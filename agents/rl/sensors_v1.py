@@ -29,7 +29,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     ## Description
 
     ``DGPTrack-v0`` with a GP tracker inside (v1: the SE DGPT-RBCM; ``DGPTrackSensors-v2``:
-    ``dgpt-bcm-ncv``, the distributed NCV GP, whose predictive standard deviation, which the
+    ``dgpt-bcm``, the distributed NCV GP, whose predictive standard deviation, which the
     observation carries, is calibrated), on a random path through a random sensor
     layout each episode (the layout is drawn from the episode's seed, so evaluation seeds
     0-99 meet layouts that training seeds 1000 and up never showed). Before each step the
@@ -93,7 +93,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``energy_weight`` | 2.0 | reward per unit of battery spent |
     | ``error_cap`` | 4 x sensing range | m, the largest error the reward counts |
     | ``error_scale`` | sensing range | metres per unit of error penalty |
-    | ``tracker`` | ``"dgpt-rbcm"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm-ncv"`` |
+    | ``tracker`` | ``"dgpt-rbcm-trend"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm"`` |
     | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
@@ -108,7 +108,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         energy_weight: float = 2.0,
         error_cap: float | None = None,
         error_scale: float | None = None,
-        tracker: str = "dgpt-rbcm",
+        tracker: str = "dgpt-rbcm-trend",
         window: int | None = 3,
         layout: str = "per_episode",
         **env_kwargs,

@@ -20,7 +20,7 @@ from pathlib import Path
 import dgpt_gym  # registers the env and the trackers
 from dgpt_gym.benchmark.episodes import add_floor_ratios, format_summary_table
 from dgpt_gym.benchmark.outputs import write_outputs
-from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
+from dgpt_gym.benchmark.protocol import WINDOWED_TRACKERS
 from dgpt_gym.benchmark.sweep import (
     DEFAULT_BATCH_SIZE,
     PAPER_SWEEP,
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.tune_windows:
             best, rows = tune_windows(
-                PAPER_GP_TRACKERS + PAPER_AS_PRINTED_TRACKERS,
+                WINDOWED_TRACKERS,
                 args.scenarios,
                 workers=args.workers,
                 progress=not args.no_progress,

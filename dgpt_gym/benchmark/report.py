@@ -17,7 +17,7 @@ import numpy as np
 from dgpt_gym.benchmark.plots import new_figure, save_figure
 from dgpt_gym.benchmark.protocol import PAPER_APPROACHES, TRAINING_SEEDS
 from dgpt_gym.benchmark.windows import TUNED_WINDOWS_PATH
-from dgpt_gym.naming import PAPER_SUFFIX, split_tracker_id, tracker_id
+from dgpt_gym.naming import MODEL_SUFFIXES, PAPER_SUFFIX, TREND_SUFFIX, split_tracker_id, tracker_id
 
 __all__ = [
     "PAPER_NRMSE_PATH",
@@ -31,6 +31,11 @@ __all__ = [
 
 PAPER_NRMSE_PATH = Path(__file__).with_name("data") / "paper_nrmse.csv"
 APPROACH_NAMES = {"gp": "Standard GP", "dgpt-rbcm": "DGPT-RBCM", "dgpt-gpoe": "DGPT-GPoE"}
+MODEL_NAMES = {
+    "": ", the NCV GP in state-space form (default)",
+    TREND_SUFFIX: ", the SE kernel around the pooled trend (`-trend`)",
+    PAPER_SUFFIX: ", the paper's model as printed (`-paper`)",
+}
 
 
 @functools.lru_cache(maxsize=1)
@@ -64,7 +69,8 @@ def paper_value(row: dict, axis: str) -> float | None:
 
 def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: str = "") -> str:
     """One of Tables II-IX: ``rows`` are per-cell summaries (:func:`dgpt_gym.benchmark.sweep.summarize_store`);
-    ``suffix="-paper"`` tabulates the trackers with the paper's model as printed."""
+    ``suffix`` picks the model (:data:`dgpt_gym.naming.MODEL_SUFFIXES`): ``""`` the default,
+    ``"-trend"`` the pooled SE trend, ``"-paper"`` the paper's model as printed."""
     ours = {
         (r["tracker"], r["noise_std"], r["clutter_rate"]): r
         for r in rows
@@ -80,7 +86,7 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: s
     header = ["noise std (m)", "clutter rate"] + [
         f"{APPROACH_NAMES[a]} {axis.upper()}" for a in PAPER_APPROACHES for axis in "xy"
     ]
-    model = ", the paper's model as printed" if suffix else ""
+    model = MODEL_NAMES[suffix]
     lines = [
         f"**{scenario}, {inputs.upper()}{model}** (paper: {table_name}). Cells: ours % (paper %, ours - paper).",
         "",
@@ -110,8 +116,8 @@ def paper_table_markdown(rows: list[dict], scenario: str, inputs: str, suffix: s
 
 def summary_against_paper(rows: list[dict], suffix: str = "") -> dict[str, float]:
     """How our NRMSEs compare with the paper's over every cell both have: the number of
-    cells, those at or below the paper's, and the mean of ours and of the paper's (%)
-    (``suffix="-paper"``: of the trackers with the paper's model as printed)."""
+    cells, those at or below the paper's, and the mean of ours and of the paper's (%), for
+    the model ``suffix`` (:data:`dgpt_gym.naming.MODEL_SUFFIXES`)."""
     paper = paper_nrmse()
     ours, theirs = [], []
     for row in rows:
@@ -144,32 +150,33 @@ def write_paper_tables(rows: list[dict], path: str | Path, command: str) -> None
     """Markdown with one paper-style table per scenario and input type, and a CSV of ``rows``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    summary = summary_against_paper(rows)
     runs = sorted({row["n_runs"] for row in rows})
     parts = [
         "## NRMSE beside the paper's Tables II-IX",
         "",
         f"Command: `{command}` ({', '.join(map(str, runs))} Monte Carlo runs per cell, seeds from 0;"
-        " window lengths tuned per scenario on training seeds, `dgpt_gym/benchmark/tuned_windows.json`).",
-        "",
-        f"Summary: {summary['at_or_below_paper']} of {summary['cells']} cells at or below the paper's value;"
-        f" mean NRMSE {summary['mean_ours']:.2f} % (paper {summary['mean_paper']:.2f} %).",
+        " the `-trend` and `-paper` trackers' window lengths tuned per scenario on training"
+        " seeds, `dgpt_gym/benchmark/tuned_windows.json`).",
         "",
     ]
-    as_printed = summary_against_paper(rows, PAPER_SUFFIX)
-    if as_printed["cells"]:
+    for suffix in MODEL_SUFFIXES:
+        summary = summary_against_paper(rows, suffix)
+        if not summary["cells"]:
+            continue
+        noise = sorted(
+            {r["noise_std"] for r in rows if split_tracker_id(r["tracker"])[2] == suffix}
+        )
         parts += [
-            "The paper's model as printed (`-paper` trackers: zero prior mean on raw coordinates;"
-            f" {', '.join(sorted({str(r['noise_std']) for r in rows if r['tracker'].endswith(PAPER_SUFFIX)}))} m noise only):"
-            f" {as_printed['at_or_below_paper']} of {as_printed['cells']} cells at or below the"
-            f" paper's value; mean NRMSE {as_printed['mean_ours']:.2f} % (paper"
-            f" {as_printed['mean_paper']:.2f} % on the same cells).",
+            f"Summary{MODEL_NAMES[suffix]} (sigma_z {', '.join(f'{n:g}' for n in noise)} m):"
+            f" {summary['at_or_below_paper']} of {summary['cells']} cells at or below the paper's"
+            f" value; mean NRMSE {summary['mean_ours']:.2f} % (paper {summary['mean_paper']:.2f} %"
+            " on the same cells).",
             "",
         ]
     scenarios = sorted({row["scenario"] for row in rows})
     for inputs in ("tgp", "stgp"):
         for scenario in scenarios:
-            for suffix in ("", PAPER_SUFFIX):
+            for suffix in MODEL_SUFFIXES:
                 table = paper_table_markdown(rows, scenario, inputs, suffix)
                 if table:
                     parts += [table, ""]
@@ -231,9 +238,10 @@ HYBRID_COMPARISON_TRACKERS = (
     "gp",
     "dgpt-rbcm",
     "hybrid",
+    "gp-trend",
+    "dgpt-rbcm-trend",
+    "hybrid-trend",
     "hybrid-paper",
-    "dgpt-bcm-ncv",
-    "hybrid-ncv",
     "cpf",
 )
 

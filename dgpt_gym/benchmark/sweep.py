@@ -144,9 +144,10 @@ QUICK_SWEEP = (
             "gp",
             "dgpt-rbcm",
             "dgpt-gpoe",
-            "dgpt-bcm-ncv",
+            "dgpt-bcm-silence",
+            "dgpt-rbcm-trend",
             "hybrid",
-            "hybrid-ncv",
+            "hybrid-trend",
             "cpf",
             "imm-pda",
             "clairvoyant",
@@ -155,32 +156,31 @@ QUICK_SWEEP = (
     ),
 )
 """``scripts/evaluate.py`` with no options (and ``make evaluate``): about a minute on 2
-cores. Besides the paper's defaults it has ``dgpt-bcm-ncv``, the distributed NCV GP in
-state-space form, and ``hybrid-ncv``, the hybrid filter around it (the most accurate
-GP-based tracker of the ``--paper`` grid), so that the main command shows them."""
+cores. The paper's approaches with the default model (the NCV GP in state-space form),
+``dgpt-bcm-silence``, which also uses the silence of the sensors in coverage gaps, the
+pooled SE trend of dgpt-gym 0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the
+CPF, IMM-PDA and the clairvoyant floor."""
 
 PAPER_SWEEP = (
     Grid(
-        trackers=PAPER_GP_TRACKERS + ("dgpt-bcm-ncv", "dgpt-bcm-ncv-silence") + STANDARD_TRACKERS,
+        trackers=PAPER_GP_TRACKERS + ("dgpt-bcm-silence",) + STANDARD_TRACKERS,
         noise_levels=(1.0, 2.0, 4.0),
         runs=100,
     ),
     Grid(trackers=PAPER_AS_PRINTED_TRACKERS, noise_levels=(1.0,), runs=100),
     Grid(
-        trackers=("hybrid", "hybrid-paper", "hybrid-ncv", "cpf"),
+        trackers=("hybrid", "hybrid-trend", "hybrid-paper", "cpf"),
         noise_levels=(1.0,),
         clutter_rates=(1.0, 5.0),
         runs=100,
     ),
 )
-"""``--paper``: Tables II-IX (six GP trackers, sigma_z in {1, 2, 4}, clutter 1 and 5) with
-the NCV GP in state-space form (``dgpt-bcm-ncv``, and ``dgpt-bcm-ncv-silence``, which
-also uses the silence of the sensors in coverage gaps), the standard trackers and the
-clairvoyant floor on every cell; the paper's model as
-printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter in
-both variants, the hybrid around ``dgpt-bcm-ncv`` and the CPF at sigma_z = 1 and both clutter
-rates (Fig. 8 is the clutter-5
-cell); 100 Monte Carlo runs each."""
+"""``--paper``: Tables II-IX (the paper's three approaches with the default model, and with
+the pooled SE trend and temporal or spatio-temporal inputs; sigma_z in {1, 2, 4}, clutter 1
+and 5) with ``dgpt-bcm-silence``, the standard trackers and the clairvoyant floor on every
+cell; the paper's model as printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter
+around DGPT-RBCM with each model, and the CPF, at sigma_z = 1 and both clutter rates (Fig. 8
+is the clutter-5 cell); 100 Monte Carlo runs each."""
 
 
 def _single_threaded_blas() -> None:

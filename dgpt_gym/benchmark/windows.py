@@ -29,7 +29,7 @@ def tuned_windows() -> dict[str, dict[str, int]]:
     return json.loads(TUNED_WINDOWS_PATH.read_text())["windows"]
 
 
-WINDOW_SOURCES = {"hybrid": "dgpt-rbcm", "hybrid-paper": "dgpt-rbcm"}
+WINDOW_SOURCES = {"hybrid-trend": "dgpt-rbcm-trend", "hybrid-paper": "dgpt-rbcm-trend"}
 """Trackers that wrap a DGPT use the window tuned for it."""
 
 

@@ -25,7 +25,7 @@ def test_tracks_s1_without_clutter():
     nrmse = np.array(
         [
             list(
-                episode(make_tracker("dgpt-rbcm"), clutter_rate=0.0, seed=seed).metrics()[k]
+                episode(make_tracker("dgpt-rbcm-trend"), clutter_rate=0.0, seed=seed).metrics()[k]
                 for k in ("nrmse_x", "nrmse_y")
             )
             for seed in range(5)
@@ -54,7 +54,7 @@ def test_gating_picks_target_measurements_in_clutter():
     """Clutter rate 5: each sensor's gated summary, eq. (28), is closer to the target than
     the unweighted mean of the same measurements, on average over an episode."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
-    tracker = make_tracker("dgpt-rbcm")
+    tracker = make_tracker("dgpt-rbcm-trend")
     observation, info = env.reset(seed=1)
     tracker.reset(info["problem_spec"])
     gated_errors, plain_errors = [], []
@@ -80,7 +80,7 @@ def test_gating_picks_target_measurements_in_clutter():
 def test_thirty_steps_without_measurements():
     env = gym.make("DGPTrack-v0", scenario="S2")
     observation, info = env.reset(seed=0)
-    tracker = make_tracker("dgpt-rbcm")
+    tracker = make_tracker("dgpt-rbcm-trend")
     tracker.reset(info["problem_spec"])
     for _ in range(20):
         estimate = tracker.update(observation)
@@ -98,14 +98,14 @@ def test_thirty_steps_without_measurements():
 
 
 def test_same_seed_same_estimates():
-    a = episode(make_tracker("dgpt-gpoe-stgp"), scenario="S4", clutter_rate=5.0, seed=3)
-    b = episode(make_tracker("dgpt-gpoe-stgp"), scenario="S4", clutter_rate=5.0, seed=3)
+    a = episode(make_tracker("dgpt-gpoe-stgp-trend"), scenario="S4", clutter_rate=5.0, seed=3)
+    b = episode(make_tracker("dgpt-gpoe-stgp-trend"), scenario="S4", clutter_rate=5.0, seed=3)
     np.testing.assert_array_equal(a.mean, b.mean)
     np.testing.assert_array_equal(a.ucb, b.ucb)
 
 
 @pytest.mark.parametrize(
-    "tracker_id", ["dgpt-poe", "dgpt-bcm", "dgpt-gpoe", "dgpt-rbcm-stgp", "gp", "gp-stgp"]
+    "tracker_id", ["dgpt-poe-trend", "dgpt-bcm-trend", "dgpt-gpoe-trend", "dgpt-rbcm-stgp-trend", "gp-trend", "gp-stgp-trend"]
 )
 def test_every_registered_variant_tracks(tracker_id):
     """Threshold: the paper's DGPT-RBCM NRMSE on this cell (Table IV, S3, sigma_z 1, clutter
@@ -135,7 +135,7 @@ def test_standard_gp_pools_every_sensor_into_one_expert():
 
 
 def test_ucb_is_wider_than_the_one_sigma_interval():
-    result = episode(make_tracker("dgpt-rbcm"), scenario="S1", clutter_rate=1.0, seed=0)
+    result = episode(make_tracker("dgpt-rbcm-trend"), scenario="S1", clutter_rate=1.0, seed=0)
     assert np.all(result.ucb >= np.sqrt(result.var) - 1e-9)
 
 
@@ -163,11 +163,11 @@ def test_lockstep_batch_equals_each_episode_alone():
     from dgpt_gym.benchmark.episodes import run_episodes
 
     settings = [
-        ("dgpt-rbcm", {}, 0),
-        ("dgpt-gpoe-stgp", {}, 1),
-        ("gp", {"window": 5}, 2),
-        ("dgpt-rbcm", {"gate_threshold": 4.0, "anytime_ucb": True}, 3),
-        ("dgpt-rbcm", {}, 4),
+        ("dgpt-rbcm-trend", {}, 0),
+        ("dgpt-gpoe-stgp-trend", {}, 1),
+        ("gp-trend", {"window": 5}, 2),
+        ("dgpt-rbcm-trend", {"gate_threshold": 4.0, "anytime_ucb": True}, 3),
+        ("dgpt-rbcm-trend", {}, 4),
     ]
     alone = [
         episode(make_tracker(t, **kw), "S2", seed, clutter_rate=5.0) for t, kw, seed in settings
@@ -217,7 +217,7 @@ def test_the_paper_model_reverts_to_the_raw_origin_the_default_follows_its_trend
 
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
     finals = {}
-    for tracker_id in ("dgpt-rbcm-paper", "dgpt-rbcm"):
+    for tracker_id in ("dgpt-rbcm-paper", "dgpt-rbcm-trend"):
         observation, info = env.reset(seed=1001)
         tracker = make_tracker(tracker_id, window=3)
         tracker.reset(info["problem_spec"])
@@ -229,9 +229,9 @@ def test_the_paper_model_reverts_to_the_raw_origin_the_default_follows_its_trend
         for step in range(300):
             estimate = tracker.update(dict(empty, t=int(observation["t"]) + step))
         finals[tracker_id] = (last_seen, estimate.mean)
-    assert np.linalg.norm(finals["dgpt-rbcm"][0]) > 100  # the track is far from the origin
+    assert np.linalg.norm(finals["dgpt-rbcm-trend"][0]) > 100  # the track is far from the origin
     assert np.linalg.norm(finals["dgpt-rbcm-paper"][1]) < 1.0
-    moved = finals["dgpt-rbcm"][1] - finals["dgpt-rbcm"][0]
+    moved = finals["dgpt-rbcm-trend"][1] - finals["dgpt-rbcm-trend"][0]
     assert np.linalg.norm(moved) > 1000  # 300 s at 10-25 m/s along the trend
 
 

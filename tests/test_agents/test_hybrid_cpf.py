@@ -159,7 +159,7 @@ def test_hybrid_tracks_and_bounds_its_estimate():
     5: 3.64 % X, 3.23 % Y), which its hybrid filter beat (Fig. 8); here 2.19 / 2.85 % (exact)
     and 2.68 / 3.16 % (paper variant)."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
-    for tracker_id in ("hybrid", "hybrid-paper"):
+    for tracker_id in ("hybrid", "hybrid-trend", "hybrid-paper"):
         result = run_episode(env, make_tracker(tracker_id), seed=0)
         assert (
             np.all(np.isfinite(result.mean))
@@ -172,7 +172,7 @@ def test_hybrid_tracks_and_bounds_its_estimate():
 def test_hybrid_feeds_its_posterior_back_to_the_dgpt():
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
     observation, info = env.reset(seed=0)
-    tracker = HybridFilter(inputs="stgp")
+    tracker = HybridFilter(gp="se", inputs="stgp")
     tracker.reset(info["problem_spec"])
     for _ in range(10):
         estimate = tracker.update(observation)
@@ -187,11 +187,11 @@ def test_hybrid_filters_in_lockstep_equal_each_alone():
     from dgpt_gym.benchmark.episodes import run_episodes
 
     settings = [
-        ("hybrid", {}, 0),
+        ("hybrid-trend", {}, 0),
         ("hybrid-paper", {}, 1),
-        ("hybrid", {"inputs": "stgp"}, 2),
-        ("hybrid-ncv", {}, 3),
-        ("hybrid-ncv", {}, 4),
+        ("hybrid-trend", {"inputs": "stgp"}, 2),
+        ("hybrid", {}, 3),
+        ("hybrid", {"aggregation": "bcm"}, 4),
     ]
 
     def env():
@@ -419,7 +419,7 @@ def test_the_likelihood_of_a_heavy_scan_is_summed_in_chunks(monkeypatch, rng):
     np.testing.assert_allclose(model.log_likelihood(positions, measurements), dense, rtol=1e-12)
 
 
-@pytest.mark.parametrize("tracker", ["hybrid", "hybrid-ncv"])
+@pytest.mark.parametrize("tracker", ["hybrid-trend", "hybrid"])
 @pytest.mark.parametrize("scenario", ["S1", "S4"])
 def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(tracker, scenario):
     """Issue 12's calibration goals on steps where a sensor senses the target, sigma_z 1,
@@ -440,8 +440,8 @@ def test_with_clutter_at_every_sensor_the_hybrid_falls_back_to_eq_42():
     per-sensor model's premise fails and the exact hybrid must use eq. (42): its estimates
     equal those of scan_model="eq42" (which would differ under the per-sensor model)."""
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0, clutter_sensors="all")
-    default = run_episode(env, HybridFilter(window=3), 1000)
-    eq42 = run_episode(env, HybridFilter(window=3, scan_model="eq42", reacquire="none"), 1000)
+    default = run_episode(env, HybridFilter(gp="se", window=3), 1000)
+    eq42 = run_episode(env, HybridFilter(gp="se", window=3, scan_model="eq42", reacquire="none"), 1000)
     np.testing.assert_array_equal(default.mean, eq42.mean)
 
 

@@ -1,5 +1,5 @@
 """The silence of the sensors in coverage gaps (agents/silence.py) and the state-space DGPT
-that uses it (StateSpaceDGPT(silence_particles=N), ``dgpt-bcm-ncv-silence``)."""
+that uses it (StateSpaceDGPT(silence_particles=N), ``dgpt-bcm-silence``)."""
 
 import gymnasium as gym
 import numpy as np
@@ -202,8 +202,8 @@ def test_bad_particle_counts_name_the_argument(value):
 
 
 def test_the_registered_tracker_uses_the_silence():
-    tracker = dgpt_gym.make_tracker("dgpt-bcm-ncv-silence")
-    assert tracker.silence_particles > 0 and tracker.name == "dgpt-bcm-ncv-silence"
+    tracker = dgpt_gym.make_tracker("dgpt-bcm-silence")
+    assert tracker.silence_particles > 0 and tracker.name == "dgpt-bcm-silence"
 
 
 def test_kernel_scale_is_silvermans_rule():

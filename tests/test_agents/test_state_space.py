@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
 
-import dgpt_gym  # noqa: F401  (registers the environment)
+import dgpt_gym
 from agents import gp
 from agents.gating import gate_measurements
 from agents.state_space import (
@@ -552,16 +552,18 @@ def test_lockstep_batch_equals_each_episode_alone():
 
 
 def test_windows_learnt_together_climb_as_each_window_filtered_alone():
-    """The lockstep learning of BCM trackers (their pooled windows of different lengths,
-    padded and filtered together) climbs, for each tracker, the likelihoods that
-    :func:`filter_window` gives on that tracker's own window steps."""
-    from agents.state_space_dgpt import _learn_pooled
+    """The lockstep learning (pooled windows of different lengths, padded and filtered
+    together) climbs, for each tracker, the likelihoods that :func:`filter_window` gives on
+    that tracker's own window steps with the exact (BCM) filter, whatever the tracker's
+    aggregation: the window's marginal likelihood is the model's."""
+    from agents.state_space_dgpt import LEARNING_FILTER, _learn_pooled
 
+    assert LEARNING_FILTER == "bcm"
     env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=5.0)
     trackers = []
-    for window, seed in ((20, 1000), (4, 1001), (9, 1002)):
+    for window, seed, aggregation in ((20, 1000, "bcm"), (4, 1001, "rbcm"), (9, 1002, "gpoe")):
         obs, info = env.reset(seed=seed)
-        tracker = StateSpaceDGPT(window=window)
+        tracker = StateSpaceDGPT(aggregation=aggregation, window=window)
         tracker.reset(info["problem_spec"])
         for _ in range(14):
             obs, *_ = env.step(tracker.update(obs).mean)
@@ -624,11 +626,11 @@ def test_bad_arguments_name_themselves(kwargs, name):
 
 @pytest.mark.parametrize("scenario", ["S1", "S4"])
 def test_is_calibrated_on_sensed_steps_at_clutter_1(scenario):
-    """Issue 12's calibration goals for dgpt-bcm-ncv on sensed steps, sigma_z 1, clutter 1,
+    """Issue 12's calibration goals for dgpt-bcm on sensed steps, sigma_z 1, clutter 1,
     six training-seed episodes (about 750 sensed steps; as for the hybrid in
     test_hybrid_cpf.py): 3-sigma coverage per axis >= 99 % less three binomial standard
     errors, median 2-D NEES in [0.7, 2.8] (measured: 99.7-100 % and 0.80-0.86)."""
-    coverage, median_nees, n = sensed_calibration("dgpt-bcm-ncv", scenario, range(1000, 1006))
+    coverage, median_nees, n = sensed_calibration("dgpt-bcm", scenario, range(1000, 1006))
     assert n > 600
     assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
     assert 0.7 <= median_nees <= 2.8, median_nees
@@ -676,3 +678,19 @@ def test_q_identification_records_without_changing_the_tracker():
     ratios = np.array([record[1] for record in recording.records_])
     assert ratios.shape == (recording.fits_, len(module.Q_GRID), 2)
     assert np.all(np.isfinite(ratios))
+
+
+def test_the_centralized_gp_is_the_bcm_aggregate_exactly():
+    """``gp`` (one Kalman update on every summary) and ``dgpt-bcm`` (the experts' local
+    posteriors aggregated by BCM) give bit for bit the same episode: under a shared prior BCM
+    is the exact posterior, computed from the same network-wide sums. RBCM, whose weights
+    differ, does not."""
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    centralized = run_episode(env, dgpt_gym.make_tracker("gp"), 7)
+    bcm = run_episode(env, dgpt_gym.make_tracker("dgpt-bcm"), 7)
+    rbcm = run_episode(env, dgpt_gym.make_tracker("dgpt-rbcm"), 7)
+    np.testing.assert_array_equal(centralized.mean, bcm.mean)
+    np.testing.assert_array_equal(centralized.var, bcm.var)
+    assert not np.array_equal(centralized.mean, rbcm.mean)
+    with pytest.raises(ValueError, match="aggregation"):
+        dgpt_gym.make_tracker("gp", aggregation="rbcm")

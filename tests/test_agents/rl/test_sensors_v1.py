@@ -117,12 +117,12 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor(env_id):
 
 
 def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
-    """The same class; v2 fixes ``tracker="dgpt-bcm-ncv"`` (window 20), so the same seed
+    """The same class; v2 fixes ``tracker="dgpt-bcm"`` (window 20), so the same seed
     and actions give the episode of v1 made with those arguments."""
     from agents.state_space_dgpt import StateSpaceDGPT
 
     v2 = gym.make("DGPTrackSensors-v2", scenario="S3").unwrapped
-    v1 = gym.make(ENV_ID, scenario="S3", tracker="dgpt-bcm-ncv", window=20).unwrapped
+    v1 = gym.make(ENV_ID, scenario="S3", tracker="dgpt-bcm", window=20).unwrapped
     assert isinstance(v2.tracker, StateSpaceDGPT) and v2.tracker.window == 20
     assert type(gym.make(ENV_ID).unwrapped.tracker).__name__ == "DGPT"
     for env in (v1, v2):

@@ -50,9 +50,18 @@ def test_the_paper_model_as_printed_gets_its_own_tables():
             "nrmse_x": nrmse,
             "nrmse_y": nrmse,
         }
-        for tracker, nrmse in (("dgpt-rbcm", 0.0105), ("dgpt-rbcm-paper", 0.0300))
+        for tracker, nrmse in (
+            ("dgpt-rbcm", 0.0105),
+            ("dgpt-rbcm-trend", 0.0200),
+            ("dgpt-rbcm-paper", 0.0300),
+        )
     ]
     ours = report.paper_table_markdown(rows, "S1", "tgp")
+    trend = report.paper_table_markdown(rows, "S1", "tgp", suffix="-trend")
+    assert "pooled trend" in trend
+    assert "| 1 | 1 | - | - | 2.00 (0.93, +1.07) | 2.00 (0.95, +1.05) | - | - |" in trend
+    assert report.summary_against_paper(rows, "-trend")["mean_ours"] == pytest.approx(2.0)
+    assert report.paper_table_markdown(rows, "S1", "stgp") == ""  # no STGP default
     printed = report.paper_table_markdown(rows, "S1", "tgp", suffix="-paper")
     assert "| 1 | 1 | - | - | 1.05 (0.93, +0.12) | 1.05 (0.95, +0.10) | - | - |" in ours
     assert "as printed" in printed
@@ -64,24 +73,40 @@ def test_the_paper_model_as_printed_gets_its_own_tables():
 
 def test_tuned_windows_lookup():
     tuned = windows.tuned_windows()
-    assert set(tuned) >= {"gp", "dgpt-rbcm", "dgpt-gpoe"}
-    assert windows.tuned_kwargs("dgpt-rbcm", "S2") == {"window": tuned["dgpt-rbcm"]["S2"]}
-    assert windows.tuned_kwargs("centroid", "S2") == {}
+    assert set(tuned) >= {"gp-trend", "dgpt-rbcm-trend", "dgpt-gpoe-trend"}
+    assert windows.tuned_kwargs("dgpt-rbcm-trend", "S2") == {
+        "window": tuned["dgpt-rbcm-trend"]["S2"]
+    }
+    assert windows.tuned_kwargs("hybrid-trend", "S2") == {
+        "window": tuned["dgpt-rbcm-trend"]["S2"]
+    }
+    # the state-space trackers' window learns q and is not tuned per scenario
+    for tracker in ("centroid", "dgpt-rbcm", "gp", "hybrid"):
+        assert windows.tuned_kwargs(tracker, "S2") == {}
 
 
 def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
     best, rows = tuning.tune_windows(
-        ["dgpt-rbcm"], ["S3"], windows=[2, 6], seeds=[1000], clutter_rates=[1.0], progress=False
+        ["dgpt-rbcm-trend"],
+        ["S3"],
+        windows=[2, 6],
+        seeds=[1000],
+        clutter_rates=[1.0],
+        progress=False,
     )
     scores = {row["window"]: row["nrmse"] for row in rows}
-    assert best == {"dgpt-rbcm": {"S3": min(scores, key=scores.get)}}
+    assert best == {"dgpt-rbcm-trend": {"S3": min(scores, key=scores.get)}}
     direct = []
     for trajectory in ("fixed", "random"):  # windows are chosen on both path modes
         env_kwargs = {
             "scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0, "trajectory": trajectory
         }
         unit = RunUnit(
-            "dgpt-rbcm", "agents.dgpt:DGPT", {"aggregation": "rbcm", "window": 6}, env_kwargs, 1000
+            "dgpt-rbcm-trend",
+            "agents.dgpt:DGPT",
+            {"aggregation": "rbcm", "window": 6},
+            env_kwargs,
+            1000,
         )
         metrics = run_unit(unit)["metrics"]
         direct.append(0.5 * (metrics["nrmse_x"] + metrics["nrmse_y"]))
@@ -93,7 +118,9 @@ def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
 
 
 def test_units_on_two_processes_equal_one():
-    grid = Grid(trackers=("dgpt-gpoe", "centroid"), scenarios=("S4",), clutter_rates=(5.0,), runs=2)
+    grid = Grid(
+        trackers=("dgpt-gpoe-trend", "centroid"), scenarios=("S4",), clutter_rates=(5.0,), runs=2
+    )
     units = grid.units()
     serial = run_units(units, workers=1, progress=False)
     parallel = run_units(units, workers=2, progress=False)
@@ -103,7 +130,7 @@ def test_units_on_two_processes_equal_one():
             [a["metrics"]["nrmse_x"], a["metrics"]["nrmse_y"]],
             [b["metrics"]["nrmse_x"], b["metrics"]["nrmse_y"]],
         )
-    assert units[0].tracker_kwargs["window"] == windows.tuned_windows()["dgpt-gpoe"]["S4"]
+    assert units[0].tracker_kwargs["window"] == windows.tuned_windows()["dgpt-gpoe-trend"]["S4"]
 
 
 def test_hybrid_comparison_table_and_figure(tmp_path):
