@@ -10,11 +10,12 @@ __all__ = ["StandardGP", "StateSpaceGP"]
 
 
 class StandardGP(DGPT):
-    """The centralized GP around the pooled SE trend (``gp-trend``): one GP on the pooled gated summaries of all sensors in the window: the same data and
-    the same gating, learning and outputs as :class:`~agents.dgpt.DGPT`, but a single
-    expert, so it solves the full marginal likelihood, eq. (21), and every sensor gates with
-    the central prediction. With one expert every aggregation returns that expert's
-    prediction and the UCB is Lemma 1's gamma^(1/2) sigma.
+    """The centralized GP around the pooled SE trend (``gp-trend``, ``gp-paper``): one GP on
+    the pooled gated summaries of all sensors in the window: the same data and the same
+    gating, learning and outputs as :class:`~agents.dgpt.DGPT`, but a single expert, so it
+    solves the full marginal likelihood, eq. (21), and every sensor gates with the central
+    prediction. With one expert every aggregation returns that expert's prediction and the
+    UCB is Lemma 1's gamma^(1/2) sigma.
 
     Args: as :class:`~agents.dgpt.DGPT` (``aggregation`` has no effect).
     """
