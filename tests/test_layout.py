@@ -122,3 +122,18 @@ def test_every_package_folder_is_a_regular_package():
         path.parent for package in PACKAGES for path in (ROOT / package).rglob("*.py")
     }
     assert sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").exists()) == []
+
+
+def test_the_citation_names_the_version_being_cited():
+    """CITATION.cff's ``version`` is the package's (pyproject.toml), so that a citation
+    points at the code that made the numbers."""
+    import re
+
+    def versions(path: str, key: str) -> list[str]:
+        pattern = re.compile(rf'^{key}\s*[:=]\s*"([^"]+)"')
+        return [
+            m[1] for line in (ROOT / path).read_text().splitlines() if (m := pattern.match(line))
+        ]
+
+    assert versions("CITATION.cff", "version") == versions("pyproject.toml", "version")
+    assert versions("pyproject.toml", "version") == [importlib.metadata.version("dgpt-gym")]
