@@ -178,6 +178,10 @@ class StateSpaceDGPT(TrackerBase):
         admission_probability: with ``clutter_sensors="all"`` only: a reporting sensor's
             measurements are used when its posterior probability of sensing the predicted
             target is at least this (:class:`agents.screening.ClutterScreen`; DGPT's 1/2).
+        process_noise: q (m^2/s^3) at the first step of an episode, per axis (the learning
+            moves it from there), within :data:`PROCESS_NOISE_BOUNDS`.
+        learn_process_noise: False keeps q at ``process_noise`` (the ablation "learning
+            off").
         silence_particles: 0 (the default) predicts through a coverage gap as the model
             says; N >= 10 also conditions on the silence of every awake sensor (the target
             is in no awake sensor's disc and inside the area) with N particles drawn from
@@ -198,6 +202,8 @@ class StateSpaceDGPT(TrackerBase):
         manoeuvre_intensity: float = MANOEUVRE["intensity"],
         manoeuvre_probability: float = MANOEUVRE["probability"],
         admission_probability: float = 0.5,
+        process_noise: float = PROCESS_NOISE_START,
+        learn_process_noise: bool = True,
         silence_particles: int = 0,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
@@ -216,6 +222,13 @@ class StateSpaceDGPT(TrackerBase):
         self.admission_probability = check_real(
             "admission_probability", admission_probability, low=0.0, high=1.0, low_inclusive=False
         )
+        self.process_noise = check_real(
+            "process_noise",
+            process_noise,
+            low=PROCESS_NOISE_BOUNDS[0],
+            high=PROCESS_NOISE_BOUNDS[1],
+        )
+        self.learn_process_noise = check_bool("learn_process_noise", learn_process_noise)
         self.silence_particles = check_integer("silence_particles", silence_particles, low=0)
         if 0 < self.silence_particles < 10:
             raise ValueError(
@@ -226,7 +239,7 @@ class StateSpaceDGPT(TrackerBase):
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
         self.noise_var_ = spec.model_noise_std**2
-        self.log_q_ = np.full(2, np.log(PROCESS_NOISE_START))
+        self.log_q_ = np.full(2, np.log(self.process_noise))
         self.screen_ = ClutterScreen(spec, self.admission_probability)
         self.rng_ = np.random.default_rng(seed)  # the gap particles' draws
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
@@ -273,7 +286,11 @@ class StateSpaceDGPT(TrackerBase):
         since :meth:`update` is this with one tracker."""
         pending = [tracker._observe(obs) for tracker, obs in zip(trackers, observations)]
         learners = [tracker for tracker, step in zip(trackers, pending) if step is not None]
-        learners = [tracker for tracker in learners if tracker._ready_to_learn()]
+        learners = [
+            tracker
+            for tracker in learners
+            if tracker.learn_process_noise and tracker._ready_to_learn()
+        ]
         groups: dict[Manoeuvre | None, list[StateSpaceDGPT]] = {}
         for tracker in learners:
             groups.setdefault(tracker.manoeuvre, []).append(tracker)

@@ -120,6 +120,13 @@ CANDIDATES = {
         for n in (200, 500, 1000)
     },
     **{
+        f"ss-rbcm-fixed-q{q:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "process_noise": q, "learn_process_noise": False},
+        )
+        for q in (1e-4, 1.0, 10.0)
+    },
+    **{
         f"ss-plain-bcm-{window}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": "bcm", "window": window, "manoeuvre_intensity": 0.0},
@@ -127,15 +134,16 @@ CANDIDATES = {
         for window in (20, 50, 150)
     },
 }
-"""Candidate models: the default (SE kernel around the pooled least-squares trend; also as
-the centralized GP and inside the hybrid filter), the
-paper's zero mean with and without bounds, and the NCV kernel with every expert's state
-integrated out (distributed with BCM / RBCM, and centralized), and the NCV GP in state-space
-form with the broadcast posterior as every expert's prior (:mod:`agents.state_space_dgpt`:
-``ss-<aggregation>-<C>`` with its manoeuvre component, ``ss-manoeuvre-<q_m>-<p>`` with other
+"""Candidate models: the SE kernel around the pooled least-squares trend (``se-trend``, the
+default until 0.8.0, registered as ``dgpt-rbcm-trend``; also as the centralized GP and
+inside the hybrid filter), the paper's zero mean with and without bounds, the NCV kernel with
+every expert's state integrated out (distributed with BCM / RBCM, and centralized), and the
+NCV GP in state-space form with the broadcast posterior as every expert's prior (the default
+since 0.9.0, :mod:`agents.state_space_dgpt`: ``ss-<aggregation>-<C>`` with its manoeuvre
+component, ``ss-rbcm-20`` being ``dgpt-rbcm``; ``ss-manoeuvre-<q_m>-<p>`` with other
 manoeuvre settings, ``ss-plain-bcm-<C>`` without, ``ss-silence-<N>`` conditioned in coverage
-gaps on the silence of the sensors with N particles; q learnt over the last C steps with
-data)."""
+gaps on the silence of the sensors with N particles, ``ss-rbcm-fixed-q<q>`` with q fixed
+instead of learnt over the last C steps with data)."""
 
 DEFAULT_CANDIDATES = (
     "se-trend",

@@ -617,11 +617,28 @@ def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
         ({"gating": "yes"}, "gating"),
         ({"manoeuvre_intensity": -1.0}, "manoeuvre_intensity"),
         ({"manoeuvre_probability": 1.0}, "manoeuvre_probability"),
+        ({"process_noise": 0.0}, "process_noise"),
+        ({"process_noise": 1e7}, "process_noise"),
+        ({"learn_process_noise": "no"}, "learn_process_noise"),
     ],
 )
 def test_bad_arguments_name_themselves(kwargs, name):
     with pytest.raises(ValueError, match=name):
         StateSpaceDGPT(**kwargs)
+
+
+def test_without_learning_q_stays_where_it_starts():
+    """``learn_process_noise=False`` keeps q at ``process_noise`` through an episode and fits
+    nothing (no share on a bound to report); the same tracker with learning starts q there
+    and moves it."""
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=1.0)
+    fixed = StateSpaceDGPT(process_noise=10.0, learn_process_noise=False)
+    run_episode(env, fixed, 1001)
+    assert fixed.fits_ == 0 and np.all(fixed.log_q_ == np.log(10.0))
+    assert np.isnan(fixed.diagnostics()["share_at_bound"])
+    learning = StateSpaceDGPT(process_noise=10.0)
+    run_episode(env, learning, 1001)
+    assert learning.fits_ > 100 and not np.allclose(learning.log_q_, np.log(10.0))
 
 
 @pytest.mark.parametrize("scenario", ["S1", "S4"])
