@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from agents.rl.heuristics import HEURISTIC_GRIDS
 from dgpt_gym.benchmark.cli import with_inputs
@@ -71,8 +72,11 @@ def test_evaluate_inputs_expand_gp_trackers_and_keep_the_others():
         "dgpt-rbcm-stgp-trend",
     ]
     assert with_inputs(["cpf", "gp-trend"], ["stgp"]) == ["cpf", "gp-stgp-trend"]
-    # the state-space trackers have temporal inputs only
+    # the state-space trackers have temporal inputs only: kept with tgp, refused for stgp alone
     assert with_inputs(["gp", "dgpt-rbcm"], ["tgp", "stgp"]) == ["gp", "dgpt-rbcm"]
+    with pytest.raises(ValueError, match="temporal inputs only.*dgpt-rbcm-stgp-trend"):
+        with_inputs(["dgpt-rbcm"], ["stgp"])
+    assert with_inputs(["dgpt-bcm-silence", "imm-pda"], ["stgp"]) == ["dgpt-bcm-silence", "imm-pda"]
 
 
 def test_evaluate_rejects_unknown_names_with_the_valid_ones():

@@ -36,7 +36,7 @@ from dgpt_gym.benchmark.tuning import (
     tune_windows,
 )
 from dgpt_gym.benchmark.windows import save_tuned_windows
-from dgpt_gym.naming import split_tracker_id, tracker_id
+from dgpt_gym.naming import MODEL_SUFFIXES, split_tracker_id, tracker_id
 from dgpt_gym.registry import tracker_spec
 
 DOCS = Path("docs")
@@ -64,7 +64,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         choices=["tgp", "stgp"],
         default=["tgp"],
         help="input types of the GP trackers: tgp runs the ids as given, stgp their "
-        "'-stgp' variants (default: tgp)",
+        "'-stgp' variants, which the -trend and -paper ids have and the default "
+        "state-space ids do not (default: tgp)",
     )
     grid.add_argument(
         "--scenarios", nargs="+", default=list(QUICK.scenarios), help="S1..S4 (default: all)"
@@ -161,17 +162,28 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def with_inputs(trackers: list[str], inputs: list[str]) -> list[str]:
     """The tracker ids for the requested input types ('-stgp' variants for stgp); trackers
-    without a GP input type (pda, imm-pda, clairvoyant, cpf, ...) are kept as given."""
+    without a GP input type (pda, imm-pda, clairvoyant, cpf, ...) are kept as given, and so
+    are the default state-space GP trackers, which have temporal inputs only, unless stgp
+    alone is asked for them (a ValueError naming their STGP forms)."""
     ids = []
     known = dgpt_gym.tracker_ids()
     for tracker in trackers:
         tracker_spec(tracker)  # unknown ids fail here, with the list of known ones
         approach, _, suffix = split_tracker_id(tracker)
-        if tracker_id(approach, "stgp", suffix) not in known:
-            ids.append(tracker)
+        if tracker_id(approach, "stgp", suffix) in known:
+            ids += [tracker_id(approach, kind, suffix) for kind in inputs]
             continue
-        for kind in inputs:
-            ids.append(tracker_id(approach, kind, suffix))
+        stgp_forms = [
+            tracker_id(approach, "stgp", other)
+            for other in MODEL_SUFFIXES
+            if tracker_id(approach, "stgp", other) in known
+        ]
+        if stgp_forms and "tgp" not in inputs:
+            raise ValueError(
+                f"{tracker!r} has temporal inputs only (--inputs tgp); the STGP forms of "
+                f"{approach!r} are {stgp_forms}"
+            )
+        ids.append(tracker)
     return list(dict.fromkeys(ids))
 
 
