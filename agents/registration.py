@@ -73,10 +73,8 @@ RENAMED = {
     "dgpt-bcm-ncv-silence": "dgpt-bcm-silence",
     "hybrid-ncv": "hybrid (now around dgpt-rbcm; around dgpt-bcm: aggregation='bcm')",
     **{
-        tracker_id(approach, inputs): tracker_id(approach, inputs, TREND_SUFFIX)
+        tracker_id(approach, "stgp"): tracker_id(approach, "stgp", TREND_SUFFIX)
         for approach in ("gp", *(f"dgpt-{a}" for a in AGGREGATIONS))
-        for inputs in INPUTS
-        if inputs == "stgp"
     },
 }
 """Ids of dgpt-gym 0.8 that 0.9.0 renamed, and their new names: the state-space NCV GP
