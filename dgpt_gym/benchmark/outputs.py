@@ -231,9 +231,12 @@ def bounds_markdown(summaries: list[dict]) -> list[str]:
     lines = [
         "## Hyperparameters on their bounds",
         "",
-        "Share of the steps whose maximum-likelihood fit (eq. (22)) ended with a hyperparameter"
-        " on a bound of `agents.dgpt.HYPERPARAMETER_BOUNDS` (either axis): those steps the"
-        " window's data did not identify the model. Mean over the cells of each scenario; %.",
+        "Share of the steps whose maximum-likelihood fit ended with a hyperparameter on a bound"
+        " (either axis): for the default state-space trackers the process noise q on"
+        " `agents.state_space_dgpt.PROCESS_NOISE_BOUNDS`, for the `-trend` and `-paper`"
+        " trackers eq. (22)'s hyperparameters on `agents.dgpt.HYPERPARAMETER_BOUNDS`. Those"
+        " steps the window's data did not identify the model. Mean over the cells of each"
+        " scenario; %.",
         "",
         "| tracker | scenario | any | " + " | ".join(names) + " |",
         "|---|---|---|" + "---|" * len(names),
