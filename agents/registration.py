@@ -17,8 +17,8 @@ RMSE ~500 m on training seeds), so the ``-paper`` trackers keep the tracking bou
 (:data:`agents.dgpt.HYPERPARAMETER_BOUNDS`)."""
 
 SILENCE_PARTICLES = 1000
-"""Particles of ``dgpt-bcm-ncv-silence`` in a coverage gap: of 200, 500 and 1000 on training
-seeds 1000-1011 (``python scripts/model_study.py --seeds 12 --paired-against ss-bcm-20
+"""Particles of ``dgpt-bcm-silence`` (``dgpt-bcm-ncv-silence`` before 0.9.0) in a coverage
+gap: of 200, 500 and 1000 on training seeds 1000-1011 (``python scripts/model_study.py --seeds 12 --paired-against ss-bcm-20
 --candidates ss-bcm-20 ss-silence-200 ss-silence-500 ss-silence-1000``), 1000 had the lowest
 RMSE (13.30 / 19.50 m on the reference / random paths, against 13.40 / 19.61 m for 500,
 13.87 / 19.87 m for 200 and 14.40 / 23.09 m without the silence)."""

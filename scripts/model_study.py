@@ -17,7 +17,7 @@ without; compare step costs one episode at a time with ``scripts/bench.py``.
     python scripts/model_study.py --seeds 10 --candidates se-trend ncv-local-bcm
     python scripts/model_study.py --clutter-sensors all --candidates se-trend se-gate-4
     python scripts/model_study.py --clutter-sensors all --clutter-rates 1 --first-seed 0 \
-        --seeds 100 --candidates se-trend gp hybrid     # held-out report
+        --seeds 100 --candidates se-trend gp-trend hybrid-trend     # held-out report
     python scripts/model_study.py --ucb-by-step --seeds 4 --candidates ss-bcm-20
     python scripts/model_study.py --paired-against ss-bcm-20 --candidates ss-bcm-20 ss-rbcm-20
 
@@ -47,8 +47,8 @@ from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_
 
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
-    "gp": ("baselines.standard_gp:StandardGP", {"window": 3}),
-    "hybrid": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
+    "gp-trend": ("baselines.standard_gp:StandardGP", {"window": 3}),
+    "hybrid-trend": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     "hybrid-ncv-per-sensor": (

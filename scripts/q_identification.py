@@ -29,7 +29,11 @@ sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402,F401  (registers the environment)
 from agents.state_space import filter_window  # noqa: E402
-from agents.state_space_dgpt import PROCESS_NOISE_BOUNDS, StateSpaceDGPT  # noqa: E402
+from agents.state_space_dgpt import (  # noqa: E402
+    LEARNING_FILTER,
+    PROCESS_NOISE_BOUNDS,
+    StateSpaceDGPT,
+)
 from dgpt_gym.benchmark.episodes import run_episodes  # noqa: E402
 
 Q_GRID = (0.01, 0.1, 1.0, 10.0)
@@ -54,7 +58,7 @@ class RecordingStateSpaceDGPT(StateSpaceDGPT):
         floor = PROCESS_NOISE_BOUNDS[0]
         grid = np.array((floor, *Q_GRID))[:, None] * np.ones(2)
         values, _, _ = filter_window(
-            self.aggregation, list(self.steps_), grid, np.full(2, self.noise_var_), self.manoeuvre
+            LEARNING_FILTER, list(self.steps_), grid, np.full(2, self.noise_var_), self.manoeuvre
         )
         on_floor = self.log_q_ - np.log(floor) < 1e-6
         self.records_.append((on_floor, values[0] - values[1:]))  # (2,), (len(Q_GRID), 2)

@@ -1,8 +1,10 @@
 """``dgpt-evaluate`` (also ``python scripts/evaluate.py``), the baseline evaluation: Monte Carlo runs of registered trackers on the paper's scenarios.
 
 With no options it runs the quick grid (S1-S4, clutter rates 1 and 5, sigma_z = 1, 10 runs of
-the standard GP, DGPT-RBCM, DGPT-GPoE, the hybrid filter, the CPF, the IMM-PDA and the
-clairvoyant floor; a few minutes on 2 cores) and prints a table per cell: NRMSE with its 95 %
+the trackers of :data:`dgpt_gym.benchmark.sweep.QUICK_SWEEP`: the standard GP, DGPT-RBCM and
+DGPT-GPoE, DGPT-BCM with the silence of the sensors, the pooled-trend DGPT-RBCM, the hybrid
+filter around each DGPT-RBCM, the CPF, the IMM-PDA and the clairvoyant floor; about a minute
+on 2 cores) and prints a table per cell: NRMSE with its 95 %
 interval over runs beside the paper's value, RMSE, the ratio to the clairvoyant floor, ANEES,
 3-sigma coverage and track loss. --paper runs the paper's full grid. Every
 finished run is stored at once in OUT/results.sqlite: re-running the same command resumes
@@ -100,9 +102,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--paper",
         action="store_true",
         help="the paper's full grid: S1-S4, sigma_z 1 2 4, clutter 1 5, standard GP, "
-        "DGPT-RBCM and DGPT-GPoE with TGP and STGP inputs, KF-PDA, IMM-PDA and the "
-        "clairvoyant floor, plus the hybrid filter (both variants) and the CPF at sigma_z 1 "
-        "(clutter 5 is Fig. 8); 100 runs each",
+        "DGPT-RBCM and DGPT-GPoE with the default model and with the pooled trend (TGP and "
+        "STGP inputs), dgpt-bcm-silence, KF-PDA, IMM-PDA and the clairvoyant floor; the "
+        "-paper trackers, the hybrid filters and the CPF at sigma_z 1 (clutter 5 is Fig. 8); "
+        "100 runs each",
     )
     parser.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
     parser.add_argument(
@@ -147,7 +150,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--tune-windows",
         action="store_true",
-        help="grid-search the window of the GP trackers (with their -paper variants) on "
+        help="grid-search the window of the -trend and -paper GP trackers on "
         "training seeds, fixed and random paths, "
         "rewrite dgpt_gym/benchmark/tuned_windows.json and exit",
     )

@@ -426,7 +426,8 @@ def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict],
     summaries = []
     for cell, runs in by_cell.items():
         tracker, scenario, noise, clutter = cell
-        window = kwargs_of_cell[cell].get("window")  # None: the tracker has no window
+        # None: the tracker's own default window (the state-space trackers': 20) or none
+        window = kwargs_of_cell[cell].get("window")
         summaries.append(
             {
                 "tracker": tracker,

@@ -706,10 +706,12 @@ def test_q_identification_records_without_changing_the_tracker():
 
 
 def test_the_centralized_gp_is_the_bcm_aggregate_exactly():
-    """``gp`` (one Kalman update on every summary) and ``dgpt-bcm`` (the experts' local
-    posteriors aggregated by BCM) give bit for bit the same episode: under a shared prior BCM
-    is the exact posterior, computed from the same network-wide sums. RBCM, whose weights
-    differ, does not."""
+    """The registration of ``gp``: it is the BCM tracker (the code computes BCM as one
+    Kalman update on every summary's network-wide sums, so the two share their code), and
+    gives bit for bit ``dgpt-bcm``'s episode, while RBCM, whose weights differ, does not.
+    That this update is the exact posterior of every summary is checked against the dense
+    GP in ``test_bcm_window_likelihood_and_posterior_are_the_dense_ncv_gp`` and
+    ``test_fused_update_is_the_aggregation_of_the_experts_local_posteriors``."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
     centralized = run_episode(env, dgpt_gym.make_tracker("gp"), 7)
     bcm = run_episode(env, dgpt_gym.make_tracker("dgpt-bcm"), 7)

@@ -53,6 +53,7 @@ def test_the_paper_model_as_printed_gets_its_own_tables():
         for tracker, nrmse in (
             ("dgpt-rbcm", 0.0105),
             ("dgpt-rbcm-trend", 0.0200),
+            ("dgpt-rbcm-stgp-trend", 0.0250),
             ("dgpt-rbcm-paper", 0.0300),
         )
     ]
@@ -60,8 +61,10 @@ def test_the_paper_model_as_printed_gets_its_own_tables():
     trend = report.paper_table_markdown(rows, "S1", "tgp", suffix="-trend")
     assert "pooled trend" in trend
     assert "| 1 | 1 | - | - | 2.00 (0.93, +1.07) | 2.00 (0.95, +1.05) | - | - |" in trend
-    assert report.summary_against_paper(rows, "-trend")["mean_ours"] == pytest.approx(2.0)
-    assert report.paper_table_markdown(rows, "S1", "stgp") == ""  # no STGP default
+    assert report.summary_against_paper(rows, "-trend")["mean_ours"] == pytest.approx(2.25)
+    # the default model has no STGP form: its STGP table is empty, the trend's is not
+    assert report.paper_table_markdown(rows, "S1", "stgp") == ""
+    assert "| 1 | 1 | - | - | 2.50 (" in report.paper_table_markdown(rows, "S1", "stgp", "-trend")
     printed = report.paper_table_markdown(rows, "S1", "tgp", suffix="-paper")
     assert "| 1 | 1 | - | - | 1.05 (0.93, +0.12) | 1.05 (0.95, +0.10) | - | - |" in ours
     assert "as printed" in printed
