@@ -57,7 +57,7 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
         for aggregation in ("rbcm", "gpoe")
         for inputs in INPUTS
     ),
-    ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact", "aggregation": "rbcm"}),
+    ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact"}),
     ("hybrid" + TREND_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "exact", "gp": "se"}),
     ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper", "gp": "se"}),
 )

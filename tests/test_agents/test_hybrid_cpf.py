@@ -465,6 +465,8 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
     from that state."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
     tracker = HybridFilter(gp="ncv")
+    # the wrapped tracker is the default dgpt-rbcm, as the registered ``hybrid``'s
+    assert tracker.dgpt.aggregation == make_tracker("hybrid").dgpt.aggregation == "rbcm"
     obs, info = env.reset(seed=1000)
     tracker.reset(info["problem_spec"], seed=1000)
     checked = 0
