@@ -127,6 +127,32 @@ CANDIDATES = {
         for q in (1e-4, 1.0, 10.0)
     },
     **{
+        f"ss-{aggregation}-local": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": aggregation, "association": "local", "manoeuvre_probability": 0.5},
+        )
+        for aggregation in ("bcm", "rbcm")
+    },
+    **{
+        f"ss-joint-m{intensity:g}-{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "manoeuvre_intensity": intensity,
+                "manoeuvre_probability": probability,
+            },
+        )
+        for intensity, probability in (
+            (0.0, 0.0),
+            (100.0, 0.05),
+            (400.0, 0.05),
+            (1600.0, 0.05),
+            (400.0, 0.2),
+            (1600.0, 0.2),
+            (400.0, 0.5),
+        )
+    },
+    **{
         f"ss-plain-bcm-{window}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": "bcm", "window": window, "manoeuvre_intensity": 0.0},
@@ -143,7 +169,11 @@ since 0.9.0, :mod:`agents.state_space_dgpt`: ``ss-<aggregation>-<C>`` with its m
 component, ``ss-rbcm-20`` being ``dgpt-rbcm``; ``ss-manoeuvre-<q_m>-<p>`` with other
 manoeuvre settings, ``ss-plain-bcm-<C>`` without, ``ss-silence-<N>`` conditioned in coverage
 gaps on the silence of the sensors with N particles, ``ss-rbcm-fixed-q<q>`` with q fixed
-instead of learnt over the last C steps with data)."""
+instead of learnt over the last C steps with data). Since 0.10.0 these associate the
+measurements jointly (:func:`agents.gating.target_probabilities`) with manoeuvre probability
+0.2; ``ss-<aggregation>-local`` is 0.9.0's model (eq. (27) per sensor, probability 0.5) and
+``ss-joint-m<q_m>-<p>`` the manoeuvre settings searched with the joint association. Results
+in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
     "se-trend",

@@ -26,6 +26,18 @@ def problem_spec(sensor_positions=((0.0, 0.0),), **changes) -> ProblemSpec:
     return ProblemSpec(np.asarray(sensor_positions, dtype=float), **{**fields, **changes})
 
 
+def measurement_obs(t, points, sensors, size=8) -> dict:
+    """A tracker observation of step ``t``: ``points`` (k, 2) reported by ``sensors`` (k,),
+    padded to ``size`` rows with the mask off."""
+    measurements = np.zeros((size, 2))
+    mask = np.zeros(size, dtype=np.int8)
+    sensor = np.zeros(size, dtype=np.int64)
+    measurements[: len(points)] = points
+    mask[: len(points)] = 1
+    sensor[: len(points)] = sensors
+    return {"t": t, "measurements": measurements, "mask": mask, "sensor": sensor}
+
+
 def mixture_moments(log_weights, means, covs):
     """Mean and covariance of a Gaussian mixture, component by component (a reference for
     the vectorized reductions): weights normalised from their logs, covariance

@@ -60,7 +60,12 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         "sensors-v2",
         "sensors woken per step",
         "agents.rl.vector:sensors_v1_vector_env",
-        (("tracker", "dgpt-bcm"), ("window", 20)),
+        (
+            ("tracker", "dgpt-bcm"),
+            ("window", 20),
+            # dgpt-bcm as 0.9.0 built it, with which the committed v2 agents were trained
+            ("tracker_options", {"association": "local", "manoeuvre_probability": 0.5}),
+        ),
     ),
 )
 """Every RL environment in ``agents/rl/``."""

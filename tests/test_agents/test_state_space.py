@@ -11,14 +11,14 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import mixture_moments, problem_spec, sensed_calibration
+from conftest import measurement_obs, mixture_moments, problem_spec, sensed_calibration
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
 
 import dgpt_gym
 from agents import gp
-from agents.gating import gate_measurements
+from agents.gating import gate_measurements, target_probabilities
 from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
@@ -332,28 +332,23 @@ def test_newton_step_solves_a_quadratic_and_respects_its_limits():
     np.testing.assert_allclose(newton_step(infinite_below, h, 1.0), [1.0])
 
 
-def measurement_obs(t, points, sensors, size=8):
-    measurements = np.zeros((size, 2))
-    mask = np.zeros(size, dtype=np.int8)
-    sensor = np.zeros(size, dtype=np.int64)
-    measurements[: len(points)] = points
-    mask[: len(points)] = 1
-    sensor[: len(points)] = sensors
-    return {"t": t, "measurements": measurements, "mask": mask, "sensor": sensor}
-
-
-def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
+@pytest.mark.parametrize("association", ["joint", "local"])
+def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(association):
     """One tracker step with data, then one without, recomputed densely: per component, the
     NCV prediction (the Stone-Soup-checked Kalman prediction), the gated summaries, their
     joint Gaussian likelihood (scipy) and the dense aggregate; the estimate is the mixture
     weighted by prior probability times likelihood (moments component by component), the UCB
     is the larger over the components of Lemma 1 on the component's error (its share of delta
     scaled by its weight) plus its distance to the estimate, and the next-step
-    prediction carries q + p q_m with the q just learnt. Without data the components keep their prior weights."""
+    prediction carries q + p q_m with the q just learnt. Without data the components keep
+    their prior weights. The summaries' weights are eq. (27)'s or, with the joint
+    association, the target probabilities at the component's prediction."""
     spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
     rng = np.random.default_rng(8)
     # probability 0.2: unequal prior weights, so that the test sees them
-    tracker = StateSpaceDGPT(aggregation="rbcm", delta=0.01, manoeuvre_probability=0.2)
+    tracker = StateSpaceDGPT(
+        aggregation="rbcm", delta=0.01, manoeuvre_probability=0.2, association=association
+    )
     tracker.reset(spec)
     for t in range(8):
         truth = np.array([5.0 + 2.0 * t, 3.0 - t])
@@ -388,11 +383,24 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components():
             )
         predicted_position = np.array([prediction[a][0][0] for a in range(2)])
         predicted_var = np.array([prediction[a][1][0, 0] for a in range(2)])
+        log_target = None
+        if association == "joint":
+            log_target = np.log(
+                target_probabilities(
+                    points,
+                    predicted_position,
+                    predicted_var,
+                    1.0,
+                    spec.detection_rate,
+                    spec.clutter_rate / spec.sensing_area,
+                )
+            )
         gated = gate_measurements(
             points,
             np.array([0, 1, 2, 1]),
             np.broadcast_to(predicted_position, points.shape),
             np.broadcast_to(predicted_var + 1.0, points.shape),
+            log_target,
         )
         log_weight, axis_means, axis_covs, axis_bounds = np.log(probability), [], [], []
         for axis in range(2):
