@@ -212,7 +212,7 @@ class ClutterScreen:
     def __init__(self, spec: ProblemSpec, admission_probability: float = 0.5) -> None:
         self.spec = spec
         self.admission_probability = admission_probability
-        self.clutter_density = spec.clutter_rate / spec.sensing_area
+        self.clutter_density = spec.clutter_density
         self.candidates = np.empty((0, 3))
         self.previous_count = 1
         self.searching = True

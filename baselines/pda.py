@@ -161,7 +161,7 @@ class IMMPDAFilter(TrackerBase):
         self.process_noises_ = np.stack(noises)
         self.noise_std_ = spec.model_noise_std
         self.measurement_noise_ = self.noise_std_**2 * np.eye(2)
-        self.clutter_density_ = spec.clutter_rate / spec.sensing_area
+        self.clutter_density_ = spec.clutter_density
         self.miss_probability_ = (
             0.0 if spec.clutter_sensors == "detecting" else coverage_gap_probability(spec)
         )

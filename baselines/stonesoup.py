@@ -48,7 +48,7 @@ Your own components, e.g. another transition model::
         predictor = KalmanPredictor(transition)
         hypothesiser = PDAHypothesiser(
             predictor, KalmanUpdater(measurement),
-            clutter_spatial_density=spec.clutter_rate / spec.sensing_area,
+            clutter_spatial_density=spec.clutter_density,
             prob_detect=0.95, prob_gate=0.999)
         return predictor, PDAUpdater(measurement), hypothesiser
 
@@ -121,7 +121,7 @@ def pda_components(
     hypothesiser = PDAHypothesiser(
         predictor,
         KalmanUpdater(measurement),
-        clutter_spatial_density=max(spec.clutter_rate / spec.sensing_area, MIN_CLUTTER_DENSITY),
+        clutter_spatial_density=max(spec.clutter_density, MIN_CLUTTER_DENSITY),
         prob_detect=prob_detect,
         prob_gate=prob_gate,
     )

@@ -76,5 +76,11 @@ class ProblemSpec:
         return float(np.pi * self.sensing_range**2)
 
     @property
+    def clutter_density(self) -> float:
+        """c = lambda_c / A_sen, the density of one clutter-producing sensor's clutter in its
+        disc (per m^2)."""
+        return self.clutter_rate / self.sensing_area
+
+    @property
     def n_sensors(self) -> int:
         return int(self.sensor_positions.shape[0])
