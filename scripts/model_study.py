@@ -97,7 +97,7 @@ CANDIDATES = {
             {"aggregation": aggregation, "window": window},
         )
         for aggregation in ("bcm", "rbcm", "gpoe", "poe")
-        for window in (8, 20, 50)
+        for window in (4, 8, 20, 50)
     },
     **{
         f"ss-manoeuvre-{intensity:g}-{probability:g}": (
@@ -129,7 +129,12 @@ CANDIDATES = {
     **{
         f"ss-{aggregation}-local": (
             "agents.state_space_dgpt:StateSpaceDGPT",
-            {"aggregation": aggregation, "association": "local", "manoeuvre_probability": 0.5},
+            {
+                "aggregation": aggregation,
+                "association": "local",
+                "manoeuvre_probability": 0.5,
+                "window": 20,
+            },
         )
         for aggregation in ("bcm", "rbcm")
     },
@@ -140,6 +145,7 @@ CANDIDATES = {
                 "aggregation": "rbcm",
                 "manoeuvre_intensity": intensity,
                 "manoeuvre_probability": probability,
+                "window": 20,
             },
         )
         for intensity, probability in (
@@ -166,13 +172,14 @@ inside the hybrid filter), the paper's zero mean with and without bounds, the NC
 every expert's state integrated out (distributed with BCM / RBCM, and centralized), and the
 NCV GP in state-space form with the broadcast posterior as every expert's prior (the default
 since 0.9.0, :mod:`agents.state_space_dgpt`: ``ss-<aggregation>-<C>`` with its manoeuvre
-component, ``ss-rbcm-20`` being ``dgpt-rbcm``; ``ss-manoeuvre-<q_m>-<p>`` with other
+component, ``ss-rbcm-4`` being ``dgpt-rbcm`` (``ss-rbcm-20`` up to 0.9.0); ``ss-manoeuvre-<q_m>-<p>`` with other
 manoeuvre settings, ``ss-plain-bcm-<C>`` without, ``ss-silence-<N>`` conditioned in coverage
 gaps on the silence of the sensors with N particles, ``ss-rbcm-fixed-q<q>`` with q fixed
 instead of learnt over the last C steps with data). Since 0.10.0 these associate the
 measurements jointly (:func:`agents.gating.target_probabilities`) with manoeuvre probability
-0.2; ``ss-<aggregation>-local`` is 0.9.0's model (eq. (27) per sensor, probability 0.5) and
-``ss-joint-m<q_m>-<p>`` the manoeuvre settings searched with the joint association. Results
+0.2; ``ss-<aggregation>-local`` is 0.9.0's model (eq. (27) per sensor, probability 0.5, window
+20) and ``ss-joint-m<q_m>-<p>`` the manoeuvre settings searched with the joint association
+(window 20, the default when they were searched). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (

@@ -3,7 +3,7 @@
 - env: step cost of ``DGPTrack-v0`` versus ``CartPole-v1``, both through ``gymnasium.make``
   (so both carry Gymnasium's default wrappers), resets included as episodes end. Goal <= 3.
 - dgpt-step: median time of one DGPT-RBCM update, the default (the state-space NCV GP,
-  learning window 20) and the pooled SE trend's (TGP, window 10), both axes, steps with 2-3
+  learning window 4) and the pooled SE trend's (TGP, window 10), both axes, steps with 2-3
   reporting sensors, warm-started learning. Goal <= 1 ms.
 - cpf: median CPF step with 2000 particles and ~10 measurements (S3, clutter rate 5). Goal
   <= 1 ms.
@@ -86,7 +86,7 @@ def bench_env(n_steps: int, repeats: int, env_kwargs: dict) -> dict:
 
 def bench_dgpt_step(episodes: int) -> dict:
     """Median update time over steps with 2-3 reporting sensors (S1, clutter rate 1): the
-    default DGPT-RBCM (the NCV GP in state-space form, learning window 20) and the pooled SE
+    default DGPT-RBCM (the NCV GP in state-space form, learning window 4) and the pooled SE
     trend's (TGP, window 10)."""
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
     results = {}
@@ -165,7 +165,7 @@ def bench_ncv_step(episodes: int) -> dict:
 
 def bench_lockstep(episodes: int) -> dict:
     """Seconds per episode alone and in one lockstep block of ``episodes`` (S3, sigma_z 2,
-    clutter rate 5, window 3 for the SE trackers and the default 20 for the state-space ones:
+    clutter rate 5, window 3 for the SE trackers and the default for the state-space ones:
     a cell of the paper's grid), on the same seeds."""
     env_kwargs = {"scenario": "S3", "noise_std": 2.0, "clutter_rate": 5.0}
     seeds = list(range(episodes))
@@ -349,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     if "lockstep" in args.only:
         blocks = args.episodes * 5
         print(
-            f"\n## lockstep blocks of {blocks} episodes (S3, sigma_z 2, clutter rate 5, window 3; the state-space trackers window 20)"
+            f"\n## lockstep blocks of {blocks} episodes (S3, sigma_z 2, clutter rate 5, window 3; the state-space trackers their default)"
         )
         for key, value in bench_lockstep(blocks).items():
             print(f"{key}: {value}")
