@@ -143,7 +143,7 @@ MANOEUVRE = {"intensity": 400.0, "probability": 0.2}
 """The default second component of the process noise (:class:`agents.state_space.Manoeuvre`):
 q_m = 400 m^2/s^3 (an acceleration burst of about 20 m/s^2 over a step) with prior
 probability 0.2 per step. Chosen with the joint association on training seeds (S1-S4, both
-path modes, clutter 1 and 5): of none and q_m 100, 400, 1600 at 0.05, 400 and 1600 at 0.2 on
+path modes, clutter 1 and 5; learning window 20, the default then): of none and q_m 100, 400, 1600 at 0.05, 400 and 1600 at 0.2 on
 seeds 1000-1005 (``python scripts/model_study.py --first-seed 1000 --seeds 6 --candidates
 ss-joint-m0-0 ss-joint-m100-0.05 ss-joint-m400-0.05 ss-joint-m1600-0.05 ss-joint-m400-0.2
 ss-joint-m1600-0.2 ss-joint-m400-0.5``), the best three and 0.9.0's 0.5 again on seeds
@@ -208,7 +208,7 @@ class StateSpaceDGPT(TrackerBase):
     Args:
         aggregation: ``"poe"``, ``"gpoe"``, ``"bcm"`` or ``"rbcm"``; BCM is the exact
             posterior here.
-        window: C, the steps with data whose likelihood learns q.
+        window: C, the steps with data whose likelihood learns q (:data:`LEARNING_WINDOW`).
         delta: total failure probability of the UCB, in (0, 1).
         gating: weigh each sensor's measurements (step 2); False takes their unweighted
             mean.
