@@ -143,8 +143,8 @@ MANOEUVRE = {"intensity": 400.0, "probability": 0.2}
 """The default second component of the process noise (:class:`agents.state_space.Manoeuvre`):
 q_m = 400 m^2/s^3 (an acceleration burst of about 20 m/s^2 over a step) with prior
 probability 0.2 per step. Chosen with the joint association on training seeds (S1-S4, both
-path modes, clutter 1 and 5; learning window 20, the default then): of none and q_m 100, 400, 1600 at 0.05, 400 and 1600 at 0.2 on
-seeds 1000-1005 (``python scripts/model_study.py --first-seed 1000 --seeds 6 --candidates
+path modes, clutter 1 and 5; learning window 20, the default then): of none and q_m 100,
+400, 1600 at 0.05, 400 and 1600 at 0.2 on seeds 1000-1005 (``python scripts/model_study.py --first-seed 1000 --seeds 6 --candidates
 ss-joint-m0-0 ss-joint-m100-0.05 ss-joint-m400-0.05 ss-joint-m1600-0.05 ss-joint-m400-0.2
 ss-joint-m1600-0.2 ss-joint-m400-0.5``), the best three and 0.9.0's 0.5 again on seeds
 1006-1017 (``--first-seed 1006 --seeds 12 --candidates ss-joint-m400-0.5 ss-joint-m400-0.05
