@@ -25,15 +25,19 @@ __all__ = ["GatedSummaries", "gate_measurements", "group_starts", "target_probab
 @dataclass(frozen=True)
 class GatedSummaries:
     """One weighted-mean summary per reporting sensor: ``sensors`` (k,) ascending,
-    ``summaries`` (k, 2); ``weights`` (n,) of the measurements in sensor-sorted order;
-    ``spread`` (k, 2) the weighted variance sum_j w_j (z_j - z_bar)^2 of each sensor's
-    measurements about its summary, per axis (0 for a single measurement): how far the
-    summary can be from the target when the weights are unsure which measurement is it."""
+    ``summaries`` (..., k, 2); ``weights`` (..., n) of the measurements in sensor-sorted
+    order; ``spread`` (..., k, 2) the weighted variance sum_j w_j (z_j - z_bar)^2 of each
+    sensor's measurements about its summary, per axis (0 for a single measurement): how far
+    the summary can be from the target when the weights are unsure which measurement is it;
+    ``weight_squares`` (..., k) the sum of each sensor's squared weights, sum_j w_j^2: the
+    summary's noise variance is sigma_n^2 times it when all its measurements are the
+    target's. The leading axes are those of the predictions the weights came from."""
 
     sensors: np.ndarray
     summaries: np.ndarray
     weights: np.ndarray
     spread: np.ndarray
+    weight_squares: np.ndarray
 
 
 def group_starts(sorted_keys: np.ndarray) -> np.ndarray:
@@ -53,13 +57,15 @@ def gate_measurements(
     Args:
         points: (n, 2) measurements of one step.
         sensors: (n,) reporting sensor of each measurement.
-        predicted_mean: (n, 2) predictive mean of the target position used for each
+        predicted_mean: (..., n, 2) predictive mean of the target position used for each
             measurement (its sensor's local prediction, or the aggregate for a sensor
-            without history).
-        predicted_var: (n, 2) predictive variance of a measurement, sigma_*^2 + sigma_n^2.
-        log_weights: (n,) unnormalised log weights to use instead of eq. (27)'s predictive
-            log likelihoods (e.g. the log of :func:`target_probabilities`); each sensor's are
-            normalised as eq. (27)'s are.
+            without history); leading axes weigh the same measurements for several
+            predictions at once.
+        predicted_var: (..., n, 2) predictive variance of a measurement, sigma_*^2 +
+            sigma_n^2.
+        log_weights: (..., n) unnormalised log weights to use instead of eq. (27)'s
+            predictive log likelihoods (e.g. the log of :func:`target_probabilities`); each
+            sensor's are normalised as eq. (27)'s are.
 
     The weights are normalised per sensor in log space, so a sensor whose measurements are
     all far from the prediction still gets a finite summary (its most likely measurement
@@ -67,22 +73,23 @@ def gate_measurements(
     """
     order = np.argsort(sensors, kind="stable")
     points, sensors = points[order], sensors[order]
-    residual = points - predicted_mean[order]
-    variance = predicted_var[order]
     if log_weights is None:
-        log_likelihood = -0.5 * np.sum(residual**2 / variance + np.log(variance), axis=1)
+        residual = points - predicted_mean[..., order, :]
+        variance = predicted_var[..., order, :]
+        log_likelihood = -0.5 * np.sum(residual**2 / variance + np.log(variance), axis=-1)
     else:
-        log_likelihood = np.asarray(log_weights, dtype=float)[order]
+        log_likelihood = np.asarray(log_weights, dtype=float)[..., order]
     starts = group_starts(sensors)
-    group_max = np.maximum.reduceat(log_likelihood, starts)
+    group_max = np.maximum.reduceat(log_likelihood, starts, axis=-1)
     counts = np.diff(np.r_[starts, sensors.size])
-    unnormalised = np.exp(log_likelihood - np.repeat(group_max, counts))
-    totals = np.add.reduceat(unnormalised, starts)
-    weights = unnormalised / np.repeat(totals, counts)
-    summaries = np.add.reduceat(weights[:, None] * points, starts, axis=0)
-    deviation = points - np.repeat(summaries, counts, axis=0)
-    spread = np.add.reduceat(weights[:, None] * deviation**2, starts, axis=0)
-    return GatedSummaries(sensors[starts], summaries, weights, spread)
+    unnormalised = np.exp(log_likelihood - np.repeat(group_max, counts, axis=-1))
+    totals = np.add.reduceat(unnormalised, starts, axis=-1)
+    weights = unnormalised / np.repeat(totals, counts, axis=-1)
+    summaries = np.add.reduceat(weights[..., None] * points, starts, axis=-2)
+    deviation = points - np.repeat(summaries, counts, axis=-2)
+    spread = np.add.reduceat(weights[..., None] * deviation**2, starts, axis=-2)
+    weight_squares = np.add.reduceat(weights**2, starts, axis=-1)
+    return GatedSummaries(sensors[starts], summaries, weights, spread, weight_squares)
 
 
 def target_probabilities(
@@ -98,7 +105,8 @@ def target_probabilities(
     (:func:`baselines.kalman.multi_detection_update`): Poisson(lambda_T) target points
     N(s, sigma_n^2 I) and clutter of density ``clutter_density`` = lambda_c / A_sen uniform
     in each reporting sensor's disc, s ~ N(``predicted_mean``, diag(``predicted_var``))
-    (2,) each, and at least one target point in the step (every reporting sensor senses the
+    (..., 2) each (leading axes: several predictions of the same points at once, giving
+    (..., n)), and at least one target point in the step (every reporting sensor senses the
     target, so the all-clutter subset is left out). The environment's count is a
     zero-truncated Poisson per sensor; neither the truncation nor "at least one target point
     per sensor" is imposed, and sensor labels do not enter.
@@ -120,21 +128,26 @@ def target_probabilities(
     them, before each sensor forms its own summary (eq. (28) with these weights).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
+    predicted_mean = np.asarray(predicted_mean, dtype=float)[..., None, :]  # (..., 1, 2)
+    predicted_var = np.asarray(predicted_var, dtype=float)[..., None, :]
+    batch = np.broadcast_shapes(predicted_mean.shape, predicted_var.shape)[:-2]
     if clutter_density <= 0.0 or points.shape[0] == 0:
-        return np.ones(points.shape[0])
+        return np.ones(batch + (points.shape[0],))
     log_scale = np.log(detection_rate) - np.log(clutter_density)
-    innovation_var = predicted_var + noise_var  # (2,)
+    innovation_var = predicted_var + noise_var
     log_evidence = log_scale + _log_normal(points - predicted_mean, innovation_var)
     anchor_mean = predicted_mean + predicted_var / innovation_var * (points - predicted_mean)
     support_var = predicted_var * noise_var / innovation_var + noise_var  # P_a + sigma_n^2
-    log_rho = log_scale + _log_normal(points[None, :, :] - anchor_mean[:, None, :], support_var)
-    log_one_plus = np.logaddexp(0.0, log_rho)  # (anchor, point)
-    np.fill_diagonal(log_one_plus, 0.0)
-    log_anchor = log_evidence + log_one_plus.sum(axis=1)
-    anchor_weight = np.exp(log_anchor - log_anchor.max())
-    beta = np.exp(log_rho - log_one_plus)
-    np.fill_diagonal(beta, 1.0)
-    return np.clip(anchor_weight @ beta / anchor_weight.sum(), 0.0, 1.0)
+    log_rho = log_scale + _log_normal(
+        points[None, :, :] - anchor_mean[..., :, None, :], support_var[..., None, :]
+    )  # (..., anchor, point)
+    diagonal = np.eye(points.shape[0], dtype=bool)
+    log_one_plus = np.where(diagonal, 0.0, np.logaddexp(0.0, log_rho))
+    log_anchor = log_evidence + log_one_plus.sum(axis=-1)
+    anchor_weight = np.exp(log_anchor - log_anchor.max(axis=-1, keepdims=True))
+    beta = np.where(diagonal, 1.0, np.exp(log_rho - log_one_plus))
+    probabilities = (anchor_weight[..., None, :] @ beta)[..., 0, :]
+    return np.clip(probabilities / anchor_weight.sum(axis=-1, keepdims=True), 0.0, 1.0)
 
 
 def _log_normal(offset: np.ndarray, var: np.ndarray) -> np.ndarray:

@@ -36,14 +36,24 @@ def propagate_particles(
     manoeuvre_intensity: float,
     manoeuvre_probability: float,
     rng: np.random.Generator,
+    turn_rates: np.ndarray | None = None,
+    turn_intensity: float = 0.0,
 ) -> np.ndarray:
     """Each state carried ``dt`` seconds under the NCV model (:func:`agents.state_space.ncv_predict`'s
     F and Q) with white-acceleration intensity ``q`` (2,) per axis, plus
     ``manoeuvre_intensity`` on both axes with probability ``manoeuvre_probability``, drawn
-    per particle (the two-component process noise of :class:`agents.state_space.Manoeuvre`)."""
+    per particle (the two-component process noise of :class:`agents.state_space.Manoeuvre`).
+    A particle whose ``turn_rates`` entry (N,) is not 0 turns instead: its velocity rotates
+    by omega dt and its position moves along the arc (:func:`baselines.cpf.turn_transition`),
+    with white-acceleration intensity ``turn_intensity`` on each axis and no manoeuvre
+    component (the turn modes of :class:`agents.state_space_dgpt.StateSpaceDGPT`)."""
     n = states.shape[0]
     manoeuvring = rng.random((n, 1)) < manoeuvre_probability
     intensity = np.asarray(q, dtype=float)[None, :] + manoeuvring * manoeuvre_intensity
+    turning = None
+    if turn_rates is not None:
+        turning = np.asarray(turn_rates, dtype=float) != 0.0
+        intensity = np.where(turning[:, None], turn_intensity, intensity)
     a, b, d = intensity * dt**3 / 3.0, intensity * dt**2 / 2.0, intensity * dt
     # Cholesky factor of [[a, b], [b, d]] in closed form (a > 0 when dt > 0 and q > 0)
     l11 = np.sqrt(a)
@@ -53,6 +63,18 @@ def propagate_particles(
     moved = np.empty_like(states)
     moved[..., 0] = states[..., 0] + dt * states[..., 1] + l11 * noise[..., 0]
     moved[..., 1] = states[..., 1] + l21 * noise[..., 0] + l22 * noise[..., 1]
+    if turning is not None and turning.any():
+        omega = np.asarray(turn_rates, dtype=float)[turning]
+        velocity = states[turning, :, 1]  # (k, 2 axes)
+        sine, cosine = np.sin(omega * dt), np.cos(omega * dt)
+        along, across = sine / omega, (1.0 - cosine) / omega
+        vx, vy = velocity[:, 0], velocity[:, 1]
+        shift = np.column_stack([along * vx - across * vy, across * vx + along * vy])
+        rotated = np.column_stack([cosine * vx - sine * vy, sine * vx + cosine * vy])
+        moved[turning, :, 0] = states[turning, :, 0] + shift + l11[turning] * noise[turning, :, 0]
+        moved[turning, :, 1] = (
+            rotated + l21[turning] * noise[turning, :, 0] + l22[turning] * noise[turning, :, 1]
+        )
     return moved
 
 

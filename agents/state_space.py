@@ -34,10 +34,12 @@ from typing import NamedTuple
 import numpy as np
 
 from agents.aggregation import AGGREGATIONS
+from baselines.cpf import turn_transition
 from baselines.kalman import reduce_mixture
 
 __all__ = [
     "ncv_predict",
+    "turn_predict",
     "expert_posteriors",
     "expert_weights",
     "fused_update",
@@ -76,6 +78,25 @@ def ncv_predict(mean: np.ndarray, cov: np.ndarray, dt: float, q: np.ndarray):
     new_cov = np.empty(np.broadcast_shapes(new_a.shape, new_b.shape, new_d.shape) + (2, 2))
     new_cov[..., 0, 0], new_cov[..., 1, 1] = new_a, new_d
     new_cov[..., 0, 1] = new_cov[..., 1, 0] = new_b
+    return new_mean, new_cov
+
+
+def turn_predict(mean: np.ndarray, cov: np.ndarray, dt: float, q, omega: float):
+    """Carry the two axes' states N(``mean`` (..., 2 axes, 2), ``cov`` (..., 2, 2, 2)) ``dt``
+    seconds forward under a coordinated turn at ``omega`` rad/s (the transition
+    :func:`baselines.cpf.turn_transition` of [x, vx, y, vy], which rotates the velocity)
+    with each axis's NCV process noise of intensity ``q`` (..., 2) as in
+    :func:`ncv_predict`. The turn couples the axes; the prediction keeps each axis's
+    2 x 2 block of the joint covariance and drops the cross-axis blocks, so that every
+    other step stays per axis (their size relative to the blocks is about |omega dt| / 2
+    for equal axis variances; omega = 0 gives :func:`ncv_predict` exactly)."""
+    q = np.broadcast_to(np.asarray(q, dtype=float), np.shape(mean)[:-1])
+    transition = turn_transition(omega, dt).reshape(2, 2, 2, 2)  # (axis, entry, axis, entry)
+    new_mean = np.einsum("aibj,...bj->...ai", transition, mean)
+    # the joint covariance is block diagonal over the axes: F P F^T = sum_b F_ab P_b F_cb^T
+    blocks = np.einsum("aibj,...bjk,albk->...ail", transition, cov, transition)
+    noise = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+    new_cov = blocks + q[..., None, None] * noise
     return new_mean, new_cov
 
 
@@ -252,7 +273,9 @@ def aggregate_error_var(method, prior_var, noise_var):
 class WindowStep:
     """One step with data in the learning window: ``dt`` (s) since the previous step with
     data, ``summaries`` (2, M) of its experts per axis and their ``spread`` (2, M) (the
-    summary's variance on top of sigma_n^2, :class:`agents.gating.GatedSummaries`), and the
+    summary's variance minus sigma_n^2: the weighted spread of its measurements,
+    :class:`agents.gating.GatedSummaries`, less sigma_n^2 (1 - sum w_j^2) when the summary's
+    variance is its weighted mean's, so it can be negative), and the
     broadcast posterior of the state after that previous step, ``mean`` (2, 2) and ``cov``
     (2, 2, 2) with the axes first: the prior the window is filtered from when this step is
     its oldest. Steps without data in between are carried by ``dt``."""
@@ -310,7 +333,7 @@ def condition_on_position(mean, cov, position_mean, position_var):
 def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = None):
     """Filter a window of steps from its oldest step's prior under ``q`` and ``noise_var``
     (both (..., 2): any leading batch, then the axis; a summary's variance is sigma_n^2 plus
-    its spread), aggregating each step's experts with ``method``; with ``manoeuvre``, each
+    its ``spread``, :class:`WindowStep`), aggregating each step's experts with ``method``; with ``manoeuvre``, each
     axis's steps follow its two-component process noise (:class:`Manoeuvre`), the axes
     weighing their components separately (so that they stay separate problems).
 

@@ -4,12 +4,19 @@ model's.
 
 The target's coordinates are NCV GPs (the integrated Wiener-velocity kernel), each driven
 by white acceleration of intensity q, except that at any step, with prior probability p, a
-manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
+manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). By default the target may also
+turn: coordinated-turn modes (:data:`TURN_MODES`) that persist from step to step through a
+Markov chain, which makes each step an IMM step over the modes (the ``turn_rates`` argument
+of :class:`StateSpaceDGPT`); below, "component" is a process-noise component of the NCV
+mode or a turn mode, each with its own prediction. Each step t:
 
 1. **Prediction**: the network's broadcast posterior of each axis's state
    [position, velocity] at the last step, carried to t under each of the two intensities
    (:func:`agents.state_space.ncv_predict`): the GP prior of s_t given the past, per
-   component.
+   component. With turn modes the broadcast posterior is one per mode with the modes'
+   probabilities; they are first mixed through the Markov chain
+   (:func:`baselines.kalman.imm_mix`), and a turn mode's prediction rotates the velocity
+   (:func:`agents.state_space.turn_predict`).
 2. **Association**, per component: every reporting sensor weighs its measurements by the
    probability that each is the target's and reports their weighted mean, eq. (28)
    (:mod:`agents.gating`). By default (``association="joint"``) the probability is that
@@ -19,15 +26,18 @@ manoeuvre adds q_m (:class:`agents.state_space.Manoeuvre`). Each step t:
    sensor's own measurements' predictive likelihoods under the broadcast prediction (which,
    with the prior shared, differs from an expert's own last posterior carried forward only
    by the expert's own last summary, which it already holds). A summary's variance is
-   sigma_n^2 plus the weighted spread of the sensor's measurements about it: a summary whose
-   weights cannot tell the target from clutter counts for less.
+   sigma_n^2 sum_j w_j^2 (the variance of the weighted mean of target points) plus the
+   weighted spread of the sensor's measurements about it: a summary whose weights cannot
+   tell the target from clutter counts for less (:data:`SUMMARY_VARIANCES`).
 3. **Experts and aggregation**, per component: each sensor with a summary updates the
    prediction with its own summary alone; the local posteriors are aggregated (PoE / GPoE /
    BCM / RBCM, eqs. (8)-(20), on the state; :func:`agents.state_space.fused_update`).
-4. **Mixture**: the components' aggregates are weighted by prior probability times the
-   exact likelihood of their summaries (:func:`agents.state_space.step_log_likelihood`, a
-   sum over experts like eq. (22)'s) and moment-matched
-   (:func:`baselines.kalman.reduce_mixture`): the broadcast posterior and the estimate. The UCB
+4. **Mixture**: the components' aggregates are weighted by prior probability (with turn
+   modes, times the mode's predicted probability) times the exact likelihood of their
+   summaries (:func:`agents.state_space.step_log_likelihood`, a sum over experts like
+   eq. (22)'s) and moment-matched (:func:`baselines.kalman.reduce_mixture`): the broadcast
+   posterior and the estimate; with turn modes, also each mode's posterior (the moments of
+   its components) and probability. The UCB
    half-width holds with probability 1 - delta under that mixture
    (:func:`agents.aggregation.mixture_half_width`): Lemma 1 on each component's aggregate,
    with the standard deviation of the aggregate's error under the model
@@ -83,6 +93,7 @@ from agents.screening import ClutterScreen
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
     Manoeuvre,
+    turn_predict,
     PooledSummaries,
     WindowStep,
     aggregate_error_var,
@@ -95,7 +106,7 @@ from agents.state_space import (
     process_noise_components,
     step_log_likelihood,
 )
-from baselines.kalman import reduce_mixture
+from baselines.kalman import imm_mix, reduce_mixture
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_bool, check_choice, check_integer, check_real
@@ -109,7 +120,23 @@ __all__ = [
     "MANOEUVRE",
     "ASSOCIATIONS",
     "LEARNING_WINDOW",
+    "TURN_MODES",
+    "SUMMARY_VARIANCES",
 ]
+
+SUMMARY_VARIANCES = ("mean", "point")
+"""The variance of a sensor's summary (its weighted mean, eq. (28)): ``"mean"`` (the default
+since 0.11.0), sigma_n^2 sum_j w_j^2 + the weighted spread of its measurements about it, and
+``"point"``, sigma_n^2 + the spread. The first is the variance of the weighted mean of points
+that are all the target's (a sensor can report several: lambda_T target points per step),
+with the spread for the doubt about which are; the second treats the summary as one of the
+sensor's points, so a sensor that reports k target points counts as one with about twice
+their mean's variance and the posterior is wider than the data warrant. With turn modes on
+training seeds 1012-1023 (``python scripts/model_study.py --first-seed 1012 --seeds 12
+--candidates ss-rbcm-4 ss-point-variance``), ``"mean"`` against ``"point"``: RMSE 7.62 / 13.74 m
+against 7.65 / 13.69 m (reference / random paths), median NEES on detected steps 0.96
+against 0.81 (nominal 1.39; S1 0.75-0.80 against 0.63-0.64), 3-sigma coverage 99.29 %
+against 99.43 %."""
 
 ASSOCIATIONS = ("joint", "local")
 """How a sensor weighs its measurements: with every reporting sensor's (``"joint"``,
@@ -139,10 +166,12 @@ PROCESS_NOISE_BOUNDS = (1e-4, 1e6)
 """Bounds of q (m^2/s^3): only what keeps the numerics finite (an acceleration standard
 deviation of 0.01 to 1000 m/s^2 over a second); a fit on them is unidentified."""
 
-MANOEUVRE = {"intensity": 400.0, "probability": 0.2}
-"""The default second component of the process noise (:class:`agents.state_space.Manoeuvre`):
-q_m = 400 m^2/s^3 (an acceleration burst of about 20 m/s^2 over a step) with prior
-probability 0.2 per step. Chosen with the joint association on training seeds (S1-S4, both
+MANOEUVRE = {"intensity": 400.0, "probability": 0.02}
+"""The default second component of the NCV mode's process noise
+(:class:`agents.state_space.Manoeuvre`): q_m = 400 m^2/s^3 (an acceleration burst of about
+20 m/s^2 over a step) with prior probability 0.02 per step since 0.11.0, chosen together
+with :data:`TURN_MODES` (see there). Without turn modes (0.10.0) the probability was 0.2,
+chosen with the joint association on training seeds (S1-S4, both
 path modes, clutter 1 and 5; learning window 20, the default then): of none and q_m 100,
 400, 1600 at 0.05, 400 and 1600 at 0.2 on seeds 1000-1005 (``python scripts/model_study.py --first-seed 1000 --seeds 6 --candidates
 ss-joint-m0-0 ss-joint-m100-0.05 ss-joint-m400-0.05 ss-joint-m1600-0.05 ss-joint-m400-0.2
@@ -154,7 +183,34 @@ RMSE 9.91 / 18.43 m on the reference / random paths against 11.01 / 19.00 m (pai
 98.82 %, and the learning steps with q on a bound 76 % against 92 %; probability 0.05 had
 the same RMSE (-0.21 +- 0.38 / -0.07 +- 0.30 m) with coverage 98.98 % and UCB coverage
 99.72 % against 99.89 %. Without the component the RMSE rose by 7.58 +- 2.87 / 6.77 +- 2.29 m
-on seeds 1000-1005: the tracker loses targets after manoeuvres."""
+on seeds 1000-1005: the tracker loses targets after manoeuvres. With turn modes the
+component still matters (without it, 3-sigma coverage on S1 at clutter 5 fell to 96.3 %),
+but a probable one competes with the turn modes for the turns."""
+
+TURN_MODES = {"rates": (0.35, -0.35), "intensity": 5.0, "stay_probability": 0.9}
+"""The default coordinated-turn modes (:class:`StateSpaceDGPT`'s ``turn_rates`` (rad/s),
+``turn_process_noise`` (m^2/s^3), ``mode_stay_probability``) since 0.11.0: turns of
++-0.35 rad/s (20 deg/s) that stay with probability 0.9 per step, with the manoeuvre
+probability of :data:`MANOEUVRE` lowered to 0.02. Chosen on training seeds (S1-S4, both path
+modes, clutter 1 and 5, RBCM): of turn rates +-0.35 or +-0.35 and +-0.52, stay probability
+0.8 / 0.9 / 0.95 and process noise 0.5 / 5 with the 0.10.0 manoeuvre component on seeds
+1000-1011 (``python scripts/model_study.py --first-seed 1000 --seeds 12 --candidates
+ss-rbcm-4 ss-turn2-s0.8-q0.5 ... ss-turn4-s0.95-q5 --paired-against ss-rbcm-4``), every
+candidate beat none on the random paths (-2.1 to -2.7 m) and most on the reference paths
+(+-0.35 with stay 0.95 and q 0.5: -0.95 +- 0.69 m); the best three again on seeds
+1012-1023 gave -0.7 to -0.9 m and -0.6 to -1.2 m. The turns gained most on S2 once the
+manoeuvre component was made rarer (it explained the turns as bursts: on seeds 1000-1011,
+``ss-turn2-s0.9-q5-m400-0.05`` against ``ss-turn2-s0.9-q5``, -1.49 +- 0.54 / -0.43 +- 0.47 m;
+S2's reference path at clutter 5, 14.3 m to 8.3 m); of manoeuvre probabilities 0.02 and
+0.05 (q_m 400 or 1600), stay 0.95 and turn noise 0.5, and four turn modes, all within
++-0.65 m of each other there, the three best on seeds 1012-1023 against 0.10.0's default
+(``--first-seed 1012 --seeds 12 --candidates ss-rbcm-4 ss-turn2-s0.9-q5-m400-0.05
+ss-turn2-s0.9-q5-m400-0.02 ss-turn2-s0.95-q5-m400-0.05 imm-pda --paired-against
+ss-rbcm-4``): this one, -2.30 +- 0.80 / -1.95 +- 0.93 m (RMSE 7.65 / 13.69 m against
+9.95 / 15.63 m; IMM-PDA 7.26 / 13.57 m), 3-sigma coverage on detected steps 99.43 % against
+99.08 %. Two turn modes cost two more hypotheses per step than none; +-0.52 rad/s (S3's
+rate) as well was not better (+0.65 +- 0.58 / +0.06 +- 0.30 m on seeds 1000-1011) and costs
+two more."""
 
 LOG_STEP = 0.05
 """h: the log-space step of the finite differences of the Newton step."""
@@ -231,6 +287,21 @@ class StateSpaceDGPT(TrackerBase):
             (:meth:`_silent_step`) and the UCB is Lemma 1 on its standard deviation.
         association: ``"joint"`` or ``"local"`` (:data:`ASSOCIATIONS`, step 2 of the module
             docstring).
+        turn_rates: omega (rad/s) of each coordinated-turn mode beside the NCV mode (empty:
+            none, the model of the module docstring). With turn modes the broadcast
+            posterior is one Gaussian per mode and their probabilities, and each step is an
+            IMM step (Blom & Bar-Shalom 1988) whose modes are this GP's: the modes' posteriors
+            are mixed through the Markov chain of ``mode_stay_probability``
+            (:func:`baselines.kalman.imm_mix`, per axis); the NCV mode predicts with its two
+            process-noise components, a turn mode rotates the velocity
+            (:func:`agents.state_space.turn_predict`); every prediction is a hypothesis of
+            steps 2-3 with its mode's predicted probability, and each mode's posterior and
+            probability is the likelihood-weighted mixture of its hypotheses. A turn carries
+            through a coverage gap when its mode persists. q is learnt for the NCV mode.
+        turn_process_noise: q (m^2/s^3) of the turn modes, fixed.
+        mode_stay_probability: P(mode j at t | mode j at t - 1) of the modes' Markov chain,
+            the rest spread evenly over the other modes, in [0, 1].
+        summary_variance: ``"mean"`` or ``"point"`` (:data:`SUMMARY_VARIANCES`).
     """
 
     name = "dgpt-bcm"
@@ -248,6 +319,10 @@ class StateSpaceDGPT(TrackerBase):
         learn_process_noise: bool = True,
         silence_particles: int = 0,
         association: str = "joint",
+        turn_rates: Sequence[float] = TURN_MODES["rates"],
+        turn_process_noise: float = TURN_MODES["intensity"],
+        mode_stay_probability: float = TURN_MODES["stay_probability"],
+        summary_variance: str = "mean",
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.window = check_integer("window", window, low=1)
@@ -278,6 +353,27 @@ class StateSpaceDGPT(TrackerBase):
                 f"silence_particles must be 0 (off) or at least 10; got {silence_particles!r}"
             )
         self.association = check_choice("association", association, ASSOCIATIONS)
+        self.summary_variance = check_choice(
+            "summary_variance", summary_variance, SUMMARY_VARIANCES
+        )
+        try:
+            rates = tuple(turn_rates)
+        except TypeError:
+            raise ValueError(
+                f"turn_rates must be a sequence of turn rates in rad/s; got {turn_rates!r}"
+            ) from None
+        self.turn_rates = tuple(
+            check_real(f"turn_rates[{index}]", rate) for index, rate in enumerate(rates)
+        )
+        self.turn_process_noise = check_real("turn_process_noise", turn_process_noise, low=0.0)
+        self.mode_stay_probability = check_real(
+            "mode_stay_probability", mode_stay_probability, low=0.0, high=1.0
+        )
+        n_modes = 1 + len(self.turn_rates)
+        self.mode_transition = np.full(
+            (n_modes, n_modes), (1.0 - self.mode_stay_probability) / max(n_modes - 1, 1)
+        )
+        np.fill_diagonal(self.mode_transition, self.mode_stay_probability if n_modes > 1 else 1.0)
         self.name = f"dgpt-{self.aggregation}" + ("-silence" if self.silence_particles else "")
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
@@ -305,7 +401,8 @@ class StateSpaceDGPT(TrackerBase):
         self.expert_covs_ = np.empty((2, 0, 2, 2))
         self.data_mean_ = self.data_cov_ = None  # broadcast posterior after the last data step
         self.data_step_ = 0
-        self.particles_ = None  # (states (N, 2, 2), weights (N,)) inside a coverage gap
+        self.particles_ = None  # (states (N, 2, 2), weights (N,), modes (N,) or None) in a gap
+        self.modes_ = None  # with turn modes: (means (K, 2, 2), covs (K, 2, 2, 2), probs (K,))
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's learning steps that left q on a
@@ -346,7 +443,7 @@ class StateSpaceDGPT(TrackerBase):
         ]
 
     def _observe(self, obs: dict):
-        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb)`` for :meth:`_keep` after
+        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb, modes)`` for :meth:`_keep` after
         the learning, or None when the step is finished (no data; its estimate is in
         ``last_estimate_``)."""
         if getattr(self, "spec_", None) is None:
@@ -378,58 +475,62 @@ class StateSpaceDGPT(TrackerBase):
             self.cov_[:, 0, 0] = spec.sensing_range**2
             self.cov_[:, 1, 1] = INITIAL_SPEED_STD**2
             self.last_step_ = step
+        if self.turn_rates and self.modes_ is None:  # a new track: every mode equally likely
+            count = len(self.mode_transition)
+            self.modes_ = self._collapsed_modes(self.mean_, self.cov_, np.full(count, 1.0 / count))
         dt = (step - self.last_step_) * spec.dt
-        predictions = [
-            (ncv_predict(self.mean_, self.cov_, dt, q), probability)
-            for q, probability in process_noise_components(np.exp(self.log_q_), self.manoeuvre)
-        ]
+        predictions, modes = self._predictions(dt, np.exp(self.log_q_), self.manoeuvre)
         if not points.shape[0]:
             log_weights = np.log([probability for _, probability in predictions])
-            mean, cov = reduce_mixture(
-                log_weights,
-                np.stack([prediction[0] for prediction, _ in predictions], axis=-2),
-                np.stack([prediction[1] for prediction, _ in predictions], axis=-3),
-            )
+            means = np.stack([prediction[0] for prediction, _ in predictions], axis=-2)
+            covs = np.stack([prediction[1] for prediction, _ in predictions], axis=-3)
+            mean, cov = reduce_mixture(log_weights, means, covs)
             ucb = agg.mixture_half_width(
                 np.exp(log_weights),
                 np.stack([prior_mean[:, 0] - mean[:, 0] for (prior_mean, _), _ in predictions]),
                 np.stack([np.sqrt(prior_cov[:, 0, 0]) for (_, prior_cov), _ in predictions]),
                 self.delta,
             )
-            self.last_estimate_ = self._keep(step, mean, cov, ucb)
+            self.last_estimate_ = self._keep(
+                step, mean, cov, ucb, self._mode_posteriors(modes, log_weights, means, covs)
+            )
             return None
-        hypotheses = [
-            self._hypothesis(points, sensors, *prediction, p) for prediction, p in predictions
-        ]
-        log_weights = np.array([h["log_weight"] for h in hypotheses])
-        mean, cov = reduce_mixture(
-            log_weights,
-            np.stack([h["mean"] for h in hypotheses], axis=-2),
-            np.stack([h["cov"] for h in hypotheses], axis=-3),
+        hypotheses = self._hypotheses(
+            points,
+            sensors,
+            np.stack([prediction[0] for prediction, _ in predictions]),
+            np.stack([prediction[1] for prediction, _ in predictions]),
+            np.log([probability for _, probability in predictions]),
         )
-        best = hypotheses[int(np.argmax(log_weights))]
+        log_weights = hypotheses["log_weight"]
+        means = np.swapaxes(hypotheses["mean"], 0, 1)  # (axis, hypothesis, 2)
+        covs = np.swapaxes(hypotheses["cov"], 0, 1)
+        mean, cov = reduce_mixture(log_weights, means, covs)
+        mode_posteriors = self._mode_posteriors(modes, log_weights, means, covs)
+        best = int(np.argmax(log_weights))
         if self.data_mean_ is None:  # the first data step: its prior is the start state
             self.data_mean_, self.data_cov_, self.data_step_ = self.mean_, self.cov_, step
         window_step = WindowStep(
             (step - self.data_step_) * spec.dt,
-            best["gated"].summaries.T,
-            best["summary_var"] - self.noise_var_,
+            hypotheses["summaries"][best],
+            hypotheses["summary_var"][best] - self.noise_var_,
             self.data_mean_,
             self.data_cov_,
         )
         self.steps_.append(window_step)
         summary_var = np.full(2, self.noise_var_)[:, None] + window_step.spread
         self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
-        self.expert_sensors_ = best["gated"].sensors
-        self.expert_means_, self.expert_covs_ = best["experts"]
+        self.expert_sensors_ = hypotheses["sensors"]
+        self.expert_means_ = hypotheses["expert_means"][best]
+        self.expert_covs_ = hypotheses["expert_covs"][best]
         ucb = agg.mixture_half_width(
             np.exp(log_weights - np.logaddexp.reduce(log_weights)),
-            np.stack([h["mean"][:, 0] - mean[:, 0] for h in hypotheses]),
-            np.stack([h["error_std"] for h in hypotheses]),
+            hypotheses["mean"][..., 0] - mean[:, 0],
+            hypotheses["error_std"],
             self.delta,
         )
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
-        return step, mean, cov, ucb
+        return step, mean, cov, ucb, mode_posteriors
 
     def _silent_step(self, step: int, awake) -> Estimate:
         """A step on which no awake sensor reports (:mod:`agents.silence`): the gap's
@@ -442,19 +543,46 @@ class StateSpaceDGPT(TrackerBase):
         jittered with those kernels: on training seeds 1000-1011 that drifted tracks (RMSE
         on the reference paths 2.15 m above dgpt-bcm's, against 1.10 m below without
         the jitter). If every particle lies in a disc (the model cannot explain the
-        silence), the weights are left as they were."""
+        silence), the weights are left as they were. With turn modes each particle also
+        carries a mode: drawn with the modes' probabilities at the gap's first step (its state
+        from that mode's posterior), moved along the modes' Markov chain at every step, and
+        turning in a turn mode; the modes' posteriors and probabilities are the moments and
+        weights of their particles (a mode without particles gets the overall moments)."""
         spec = self.spec_
         dt = (step - self.last_step_) * spec.dt
+        count, n = len(self.mode_transition), self.silence_particles
         if self.particles_ is None:
-            states = draw_particles(self.mean_, self.cov_, self.silence_particles, self.rng_)
-            weights = np.full(self.silence_particles, 1.0 / self.silence_particles)
+            modes = None
+            if self.turn_rates:
+                modes = self.rng_.choice(count, size=n, p=self.modes_[2])
+                states = np.empty((n, 2, 2))
+                for mode in range(count):
+                    own = modes == mode
+                    states[own] = draw_particles(
+                        self.modes_[0][mode], self.modes_[1][mode], int(own.sum()), self.rng_
+                    )
+            else:
+                states = draw_particles(self.mean_, self.cov_, n, self.rng_)
+            weights = np.full(n, 1.0 / n)
         else:
-            states, weights = self.particles_
+            states, weights, modes = self.particles_
+        turn_rates = None
+        if modes is not None:
+            cumulative = np.cumsum(self.mode_transition[modes], axis=1)
+            modes = np.minimum((self.rng_.random((n, 1)) > cumulative).sum(axis=1), count - 1)
+            turn_rates = np.r_[0.0, self.turn_rates][modes]
         intensity, probability = (
             (self.manoeuvre.intensity, self.manoeuvre.probability) if self.manoeuvre else (0, 0)
         )
         states = propagate_particles(
-            states, dt, np.exp(self.log_q_), intensity, probability, self.rng_
+            states,
+            dt,
+            np.exp(self.log_q_),
+            intensity,
+            probability,
+            self.rng_,
+            turn_rates,
+            self.turn_process_noise,
         )
         sensor_positions = np.asarray(spec.sensor_positions)
         if awake is not None:
@@ -465,35 +593,57 @@ class StateSpaceDGPT(TrackerBase):
             weights = weights * silent
             weights = weights / weights.sum()
         if 1.0 / np.sum(weights**2) < weights.size / 2:
-            states = states[resample_systematic(weights, self.rng_)]
+            chosen = resample_systematic(weights, self.rng_)
+            states = states[chosen]
+            modes = None if modes is None else modes[chosen]
             weights = np.full(weights.size, 1.0 / weights.size)
-        self.particles_ = (states, weights)
+        self.particles_ = (states, weights, modes)
         mean, cov = particle_moments(states, weights)
         cov = cov + kernel_cov
         ucb = np.sqrt(agg.gamma_one_step(1, self.delta) * cov[:, 0, 0])
-        return self._keep(step, mean, cov, ucb)
+        mode_states = None
+        if modes is not None:
+            probabilities = np.bincount(modes, weights, minlength=count)
+            mode_means = np.broadcast_to(mean, (count, 2, 2)).copy()
+            mode_covs = np.broadcast_to(cov, (count, 2, 2, 2)).copy()
+            for mode in np.flatnonzero(probabilities > 1e-12):
+                own = modes == mode
+                mode_means[mode], mode_cov = particle_moments(
+                    states[own], weights[own] / probabilities[mode]
+                )
+                mode_covs[mode] = mode_cov + kernel_cov
+            probabilities = np.maximum(probabilities, 1e-300)
+            mode_states = (mode_means, mode_covs, probabilities / probabilities.sum())
+        return self._keep(step, mean, cov, ucb, mode_states)
 
     def _ready_to_learn(self) -> bool:
         """Whether the window holds the three summaries a Newton step needs."""
         return sum(item.summaries.shape[1] for item in self.steps_) >= 3
 
-    def _hypothesis(self, points, sensors, prior_mean, prior_cov, probability) -> dict:
-        """One component of the process noise at this step: the association around its
-        prediction (step 2 of the module docstring), the experts' local posteriors, their aggregate, the exact log
-        likelihood of the summaries plus the log prior probability (both axes), and the
-        UCB half-width of the aggregate."""
-        mean = np.broadcast_to(prior_mean[:, 0], points.shape)
-        var = np.broadcast_to(prior_cov[:, 0, 0], points.shape)
+    def _hypotheses(self, points, sensors, prior_means, prior_covs, log_priors) -> dict:
+        """The step's H predictions (``prior_means`` (H, 2, 2), ``prior_covs``
+        (H, 2, 2, 2), log prior probabilities ``log_priors`` (H,)) as hypotheses, all at
+        once: the association around each prediction (step 2 of the module docstring), the
+        experts' local posteriors, their aggregate, the exact log likelihood of the
+        summaries plus the log prior probability (both axes), and the standard deviation of
+        the aggregate's error (the UCB's). Arrays are per hypothesis first, then axis:
+        ``summaries`` and ``summary_var`` (H, 2, M), ``log_weight`` (H,), ``mean`` (H, 2, 2),
+        ``cov`` (H, 2, 2, 2), ``expert_means`` (H, 2, M, 2), ``expert_covs``
+        (H, 2, M, 2, 2), ``error_std`` (H, 2); ``sensors`` (M,) the experts."""
+        position_mean, position_var = prior_means[..., 0], prior_covs[..., 0, 0]  # (H, 2)
+        shape = position_mean.shape[:1] + points.shape
+        mean = np.broadcast_to(position_mean[:, None, :], shape)
+        var = np.broadcast_to(position_var[:, None, :], shape)
         log_weights = None
         if not self.gating:
-            mean, var = points, np.ones_like(points)
+            mean, var = np.broadcast_to(points, shape), np.ones(shape)
         elif self.association == "joint":
             spec = self.spec_
             log_weights = np.log(
                 target_probabilities(
                     points,
-                    prior_mean[:, 0],
-                    prior_cov[:, 0, 0],
+                    position_mean,
+                    position_var,
                     self.noise_var_,
                     spec.detection_rate,
                     spec.clutter_density,
@@ -501,21 +651,27 @@ class StateSpaceDGPT(TrackerBase):
                 + _TINY_PROBABILITY
             )
         gated = gate_measurements(points, sensors, mean, var + self.noise_var_, log_weights)
-        summaries, summary_var = gated.summaries.T, self.noise_var_ + gated.spread.T
-        log_likelihood = step_log_likelihood(
-            prior_mean[:, 0], prior_cov[:, 0, 0], summaries, summary_var
+        summaries = np.swapaxes(gated.summaries, -1, -2)
+        noise_var = self.noise_var_
+        if self.summary_variance == "mean":
+            noise_var = noise_var * gated.weight_squares[..., None, :]
+        summary_var = noise_var + np.swapaxes(gated.spread, -1, -2)
+        log_likelihood = step_log_likelihood(position_mean, position_var, summaries, summary_var)
+        posterior = fused_update(self.aggregation, prior_means, prior_covs, summaries, summary_var)
+        expert_means, expert_covs = expert_posteriors(
+            prior_means, prior_covs, summaries, summary_var
         )
-        posterior = fused_update(self.aggregation, prior_mean, prior_cov, summaries, summary_var)
-        experts = expert_posteriors(prior_mean, prior_cov, summaries, summary_var)
         return {
-            "gated": gated,
+            "sensors": gated.sensors,
+            "summaries": summaries,
             "summary_var": summary_var,
-            "log_weight": np.log(probability) + log_likelihood.sum(),
+            "log_weight": log_priors + log_likelihood.sum(axis=-1),
             "mean": posterior[0],
             "cov": posterior[1],
-            "experts": experts,
+            "expert_means": expert_means,
+            "expert_covs": expert_covs,
             "error_std": np.sqrt(
-                aggregate_error_var(self.aggregation, prior_cov[:, 0, 0], summary_var)
+                aggregate_error_var(self.aggregation, position_var, summary_var)
             ),
         }
 
@@ -531,20 +687,92 @@ class StateSpaceDGPT(TrackerBase):
         self.fits_ += 1
         self.fits_at_bound_ += int(on_bound.any())
 
-    def _keep(self, step, mean, cov, ucb) -> Estimate:
-        """Broadcast the step's posterior and return the estimate with the next-step
-        prediction (the mixture's, which the hybrid filter takes as its prior)."""
+    def _keep(self, step, mean, cov, ucb, modes=None) -> Estimate:
+        """Broadcast the step's posterior (with turn modes, ``modes``, the modes' posteriors
+        and probabilities; None collapses every mode to the posterior, keeping the
+        probabilities) and return the estimate with the next-step prediction (the
+        mixture's, which the hybrid filter takes as its prior)."""
         self.mean_, self.cov_, self.last_step_ = mean, cov, step
+        if self.turn_rates:
+            self.modes_ = modes if modes is not None else self._collapsed_modes(mean, cov)
         prior_next = self._predict_next(mean, cov)
         return Estimate(mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, prior_next)
 
+    def _collapsed_modes(self, mean, cov, probabilities=None):
+        """Every mode's posterior set to N(``mean``, ``cov``), with ``probabilities`` (the
+        current ones by default)."""
+        if probabilities is None:
+            probabilities = self.modes_[2]
+        count = len(probabilities)
+        return (
+            np.broadcast_to(mean, (count,) + mean.shape),
+            np.broadcast_to(cov, (count,) + cov.shape),
+            probabilities,
+        )
+
+    def _predictions(self, dt: float, q: np.ndarray, manoeuvre: Manoeuvre | None):
+        """The step's predictions ``[((mean (2, 2), cov (2, 2, 2)), prior probability),
+        ...]`` and the mode of each (an int array, or None without turn modes): the NCV
+        mode's under each process-noise component, then each turn mode's; with turn modes
+        from the IMM's mixed posteriors, weighted by the predicted mode probabilities."""
+        if not self.turn_rates:
+            return [
+                (ncv_predict(self.mean_, self.cov_, dt, intensity), probability)
+                for intensity, probability in process_noise_components(q, manoeuvre)
+            ], None
+        means, covs, probabilities = self.modes_
+        mixed_means, mixed_covs, predicted = imm_mix(
+            np.swapaxes(means, 0, 1), np.swapaxes(covs, 0, 1), probabilities, self.mode_transition
+        )
+        mixed_means, mixed_covs = np.swapaxes(mixed_means, 0, 1), np.swapaxes(mixed_covs, 0, 1)
+        predictions = [
+            (ncv_predict(mixed_means[0], mixed_covs[0], dt, intensity), predicted[0] * probability)
+            for intensity, probability in process_noise_components(q, manoeuvre)
+        ]
+        modes = [0] * len(predictions)
+        for mode, omega in enumerate(self.turn_rates, start=1):
+            prediction = turn_predict(
+                mixed_means[mode], mixed_covs[mode], dt, self.turn_process_noise, omega
+            )
+            predictions.append((prediction, predicted[mode]))
+            modes.append(mode)
+        return predictions, np.array(modes)
+
+    def _mode_posteriors(self, modes, log_weights, means, covs):
+        """Each mode's posterior, the mixture of its hypotheses (``log_weights`` (H,),
+        ``means`` (2, H, 2), ``covs`` (2, H, 2, 2)), and its probability; None without turn
+        modes."""
+        if modes is None:
+            return None
+        log_weights = np.maximum(log_weights - np.logaddexp.reduce(log_weights), -700.0)
+        count = len(self.mode_transition)
+        mode_means, mode_covs = np.empty((count, 2, 2)), np.empty((count, 2, 2, 2))
+        probabilities = np.empty(count)
+        for mode in range(count):
+            own = modes == mode
+            mode_means[mode], mode_covs[mode] = reduce_mixture(
+                log_weights[own], means[:, own], covs[:, own]
+            )
+            probabilities[mode] = np.exp(log_weights[own]).sum()
+        probabilities = np.maximum(probabilities, 1e-300)
+        return mode_means, mode_covs, probabilities / probabilities.sum()
+
     def _predict_next(self, mean, cov) -> tuple[np.ndarray, np.ndarray]:
-        """The state's prediction one step ahead under the mixture's moments (q + p q_m);
-        kept in ``next_state_`` and, for the position, ``prior_next_``, which it returns."""
+        """The state's prediction one step ahead under the mixture's moments (q + p q_m; with
+        turn modes, the moments of the IMM's predictions); kept in ``next_state_`` and, for
+        the position, ``prior_next_``, which it returns."""
         q = np.exp(self.log_q_)
         if self.manoeuvre is not None:  # the moments of the two components' predictions
             q = q + self.manoeuvre.probability * self.manoeuvre.intensity
-        next_mean, next_cov = ncv_predict(mean, cov, self.spec_.dt, q)
+        if self.turn_rates:
+            predictions, _ = self._predictions(self.spec_.dt, q, None)
+            next_mean, next_cov = reduce_mixture(
+                np.log(np.maximum([probability for _, probability in predictions], 1e-300)),
+                np.stack([prediction[0] for prediction, _ in predictions], axis=-2),
+                np.stack([prediction[1] for prediction, _ in predictions], axis=-3),
+            )
+        else:
+            next_mean, next_cov = ncv_predict(mean, cov, self.spec_.dt, q)
         self.next_state_ = (next_mean, next_cov)
         self.prior_next_ = (next_mean[:, 0], next_cov[:, 0, 0])
         return self.prior_next_
@@ -559,6 +787,8 @@ class StateSpaceDGPT(TrackerBase):
             raise RuntimeError("set_estimate needs a prior: call it after an update that had one")
         mean, cov = condition_on_position(*self.prior_state_, estimate, var)
         self.mean_, self.cov_ = mean, cov
+        if self.turn_rates:
+            self.modes_ = self._collapsed_modes(mean, cov)
         if self.data_mean_ is not None and self.data_step_ == self.last_step_:
             self.data_mean_, self.data_cov_ = mean, cov
         return self._predict_next(mean, cov)

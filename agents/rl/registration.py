@@ -64,7 +64,15 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
             ("tracker", "dgpt-bcm"),
             ("window", 20),
             # dgpt-bcm as 0.9.0 built it, with which the committed v2 agents were trained
-            ("tracker_options", {"association": "local", "manoeuvre_probability": 0.5}),
+            (
+                "tracker_options",
+                {
+                    "association": "local",
+                    "manoeuvre_probability": 0.5,
+                    "turn_rates": (),
+                    "summary_variance": "point",
+                },
+            ),
         ),
     ),
 )

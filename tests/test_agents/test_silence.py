@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import dgpt_gym  # noqa: F401  (registers the environment)
 from agents.particles import kernel_scale, resample_systematic
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
-from agents.state_space import ncv_predict
+from agents.state_space import ncv_predict, turn_predict
 from agents.state_space_dgpt import StateSpaceDGPT
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
 
@@ -32,6 +32,30 @@ def test_propagated_particles_have_the_ncv_prediction_moments(probability):
     np.testing.assert_array_less(np.abs(mean - expected_mean), 5 * std / np.sqrt(n))
     scale = np.sqrt(np.einsum("ai,aj->aij", std, std) ** 2 * 2 / n)
     np.testing.assert_array_less(np.abs(cov - expected_cov), 5 * scale)
+
+
+def test_turning_particles_have_the_turn_prediction_moments():
+    """Particles in a turn mode, carried 2 s, have the moments of the coordinated-turn
+    prediction (:func:`agents.state_space.turn_predict`, from a point state so that the
+    dropped cross-axis blocks are zero) with the turn's intensity, whatever the manoeuvre
+    component; the non-turning ones keep the NCV moments. Tolerances as in the NCV test."""
+    rng = np.random.default_rng(7)
+    n, dt, q, omega, q_turn = 40000, 2.0, np.array([0.5, 3.0]), 0.35, 4.0
+    start = np.array([[10.0, 2.0], [-5.0, 12.0]])
+    rates = np.where(np.arange(2 * n) < n, omega, 0.0)
+    states = propagate_particles(
+        np.repeat(start[None], 2 * n, axis=0), dt, q, 40.0, 0.3, rng, rates, q_turn
+    )
+    for moved, expected in (
+        (states[:n], turn_predict(start, np.zeros((2, 2, 2)), dt, np.full(2, q_turn), omega)),
+        (states[n:], ncv_predict(start, np.zeros((2, 2, 2)), dt, q + 0.3 * 40.0)),
+    ):
+        mean, cov = particle_moments(moved, np.full(n, 1.0 / n))
+        expected_mean, expected_cov = expected
+        std = np.sqrt(np.diagonal(expected_cov, axis1=1, axis2=2))
+        np.testing.assert_array_less(np.abs(mean - expected_mean), 5 * std / np.sqrt(n))
+        scale = np.sqrt(np.einsum("ai,aj->aij", std, std) ** 2 * 2 / n)
+        np.testing.assert_array_less(np.abs(cov - expected_cov), 5 * scale)
 
 
 def test_drawn_particles_have_the_state_moments():
@@ -110,7 +134,7 @@ def test_in_a_gap_every_weighted_particle_is_where_no_sensor_senses_it():
         estimate = tracker.update(observation)
         if tracker.particles_ is not None:
             gap_steps += 1
-            states, weights = tracker.particles_
+            states, weights, _ = tracker.particles_
             if np.ptp(weights) > 0:  # weighted at this step, not resampled
                 weighted_steps += 1
                 carried = states[weights > 0, :, 0]
@@ -190,7 +214,7 @@ def test_a_sleeping_sensors_disc_does_not_constrain():
         for t in range(5):
             tracker.update(obs(t, points + [0.1 * t, 0.0]))
         tracker.update(obs(5, np.empty((0, 2)), awake))
-        states, weights = tracker.particles_
+        states, weights, _ = tracker.particles_
         inside = np.hypot(*(states[weights > 0, :, 0] - [500.0, 500.0]).T) <= spec.sensing_range
         assert inside.any() == expect_inside
 

@@ -118,11 +118,17 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor(env_id):
 
 def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
     """The same class; v2 fixes ``tracker="dgpt-bcm"`` (window 20) as 0.9.0 built it (eq.
-    (27) association, manoeuvre probability 0.5), so the same seed and actions give the
+    (27) association, manoeuvre probability 0.5, no turn modes, a summary's variance
+    sigma_n^2 + its spread), so the same seed and actions give the
     episode of v1 made with those arguments."""
     from agents.state_space_dgpt import StateSpaceDGPT
 
-    options = {"association": "local", "manoeuvre_probability": 0.5}
+    options = {
+        "association": "local",
+        "manoeuvre_probability": 0.5,
+        "turn_rates": (),
+        "summary_variance": "point",
+    }
     v2 = gym.make("DGPTrackSensors-v2", scenario="S3").unwrapped
     v1 = gym.make(
         ENV_ID, scenario="S3", tracker="dgpt-bcm", window=20, tracker_options=options
