@@ -45,6 +45,9 @@ sys.path.insert(0, str(ROOT))
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
 from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_units  # noqa: E402
 
+MODEL_0_10 = {"turn_rates": (), "summary_variance": "point"}
+"""The state-space model's arguments that 0.11.0 changed, as 0.10.0 had them."""
+
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp-trend": ("baselines.standard_gp:StandardGP", {"window": 3}),
@@ -134,6 +137,7 @@ CANDIDATES = {
                 "association": "local",
                 "manoeuvre_probability": 0.5,
                 "window": 20,
+                **MODEL_0_10,
             },
         )
         for aggregation in ("bcm", "rbcm")
@@ -146,6 +150,7 @@ CANDIDATES = {
                 "manoeuvre_intensity": intensity,
                 "manoeuvre_probability": probability,
                 "window": 20,
+                **MODEL_0_10,
             },
         )
         for intensity, probability in (
@@ -158,6 +163,55 @@ CANDIDATES = {
             (400.0, 0.5),
         )
     },
+    **{
+        f"ss-turn{len(rates)}-s{stay:g}-q{q:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "turn_rates": rates,
+                "mode_stay_probability": stay,
+                "turn_process_noise": q,
+                "summary_variance": "point",
+            },
+        )
+        for rates in ((0.35, -0.35), (0.35, -0.35, 0.52, -0.52))
+        for stay in (0.8, 0.9, 0.95, 0.98)
+        for q in (0.5, 5.0)
+    },
+    **{
+        f"ss-turn{len(rates)}-s{stay:g}-q{q:g}-m{intensity:g}-{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "turn_rates": rates,
+                "mode_stay_probability": stay,
+                "turn_process_noise": q,
+                "manoeuvre_intensity": intensity,
+                "manoeuvre_probability": probability,
+                "summary_variance": "point",
+            },
+        )
+        for rates, stay, q, intensity, probability in (
+            *(
+                ((0.35, -0.35), 0.9, 5.0, intensity, probability)
+                for intensity, probability in (
+                    (400.0, 0.05),
+                    (100.0, 0.2),
+                    (0.0, 0.0),
+                    (1600.0, 0.05),
+                    (400.0, 0.02),
+                    (1600.0, 0.02),
+                )
+            ),
+            ((0.35, -0.35), 0.95, 5.0, 400.0, 0.05),
+            ((0.35, -0.35), 0.9, 0.5, 400.0, 0.05),
+            ((0.35, -0.35, 0.52, -0.52), 0.9, 5.0, 400.0, 0.05),
+        )
+    },
+    "ss-point-variance": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", "summary_variance": "point"},
+    ),
     **{
         f"ss-plain-bcm-{window}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
@@ -179,7 +233,15 @@ instead of learnt over the last C steps with data). Since 0.10.0 these associate
 measurements jointly (:func:`agents.gating.target_probabilities`) with manoeuvre probability
 0.2; ``ss-<aggregation>-local`` is 0.9.0's model (eq. (27) per sensor, probability 0.5, window
 20) and ``ss-joint-m<q_m>-<p>`` the manoeuvre settings searched with the joint association
-(window 20, the default when they were searched). Results
+(window 20, the default when they were searched), both without 0.11.0's turn modes and with
+a summary's variance sigma_n^2 + its spread (:data:`MODEL_0_10`). Since 0.11.0 the
+defaults have coordinated-turn modes and a summary's variance is its weighted mean's:
+``ss-turn<K>-s<stay>-q<q>`` adds K turn modes (+-0.35 rad/s, and +-0.52 with K = 4) that stay
+with probability ``stay`` and have process noise q (``turn_rates`` of
+:class:`~agents.state_space_dgpt.StateSpaceDGPT`) to 0.10.0's model, ``-m<q_m>-<p>`` with
+another manoeuvre component (the search of :data:`~agents.state_space_dgpt.TURN_MODES`, all
+with the summary variance ``"point"``), and ``ss-point-variance`` is the default with that
+variance. Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
