@@ -516,9 +516,12 @@ def test_the_clairvoyant_floor_is_below_every_registered_tracker(scenario):
     clairvoyant's Singer extrapolation (7.5 m). Measured smallest ratio of the mean RMSEs:
     1.26 (imm-pda, S4); S1 1.44 (dgpt-poe-stgp), S2 14, S3 20 (imm-pda).
 
-    On the steps where some sensor senses the target, the floor holds per seed with a
-    margin: the clairvoyant's RMSE times 1.5 is below every other tracker's (measured
-    smallest ratio 1.92, imm-pda on S4).
+    On the steps where some sensor senses the target, the floor holds per seed: the
+    clairvoyant's RMSE is below every other tracker's. There the estimate is dominated by the
+    measurements and good trackers come near the floor: measured smallest ratios in 0.11.0
+    1.06 on S4 (dgpt-bcm-silence; the other state-space trackers 1.14), 1.36 on S1
+    (dgpt-bcm-silence), 2.95 on S3 and 9.42 on S2 (imm-pda); up to 0.10.0 every ratio was
+    above 1.5, which the test then asked for.
 
     The floor does not use the silence of the sensors in coverage gaps (the target is in no
     awake sensor's disc), so a tracker that does (``silence_particles``, e.g.
@@ -545,7 +548,7 @@ def test_the_clairvoyant_floor_is_below_every_registered_tracker(scenario):
         episode, detected = run(tracker_id)
         if not getattr(make_tracker(tracker_id), "silence_particles", 0):
             assert floor_episode.mean() < episode.mean(), (tracker_id, floor_episode, episode)
-        assert np.all(1.5 * floor_detected < detected), (tracker_id, floor_detected, detected)
+        assert np.all(floor_detected < detected), (tracker_id, floor_detected, detected)
 
 
 # -- 6. only oracles see the truth --------------------------------------------------------
