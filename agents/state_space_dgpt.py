@@ -93,7 +93,6 @@ from agents.screening import ClutterScreen
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
     Manoeuvre,
-    turn_predict,
     PooledSummaries,
     WindowStep,
     aggregate_error_var,
@@ -105,6 +104,7 @@ from agents.state_space import (
     pool_summaries,
     process_noise_components,
     step_log_likelihood,
+    turn_predict,
 )
 from baselines.kalman import imm_mix, reduce_mixture
 from dgpt_gym.problem import ProblemSpec
@@ -385,6 +385,7 @@ class StateSpaceDGPT(TrackerBase):
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
+        self.next_modes_ = self.prior_modes_ = None  # with turn modes: the same per mode
         self.fits_ = 0
         self.fits_at_bound_ = 0
         self._start_track()
@@ -451,6 +452,7 @@ class StateSpaceDGPT(TrackerBase):
         spec = self.spec_
         step = int(obs["t"])
         self.prior_state_ = self.next_state_
+        self.prior_modes_ = self.next_modes_
         mask = np.asarray(obs["mask"]).astype(bool)
         if self.silence_particles and self.mean_ is not None:
             if not mask.any():
@@ -766,11 +768,14 @@ class StateSpaceDGPT(TrackerBase):
             q = q + self.manoeuvre.probability * self.manoeuvre.intensity
         if self.turn_rates:
             predictions, _ = self._predictions(self.spec_.dt, q, None)
+            means = np.stack([prediction[0] for prediction, _ in predictions])
+            covs = np.stack([prediction[1] for prediction, _ in predictions])
             next_mean, next_cov = reduce_mixture(
                 np.log(np.maximum([probability for _, probability in predictions], 1e-300)),
-                np.stack([prediction[0] for prediction, _ in predictions], axis=-2),
-                np.stack([prediction[1] for prediction, _ in predictions], axis=-3),
+                np.swapaxes(means, 0, 1),
+                np.swapaxes(covs, 0, 1),
             )
+            self.next_modes_ = (means, covs)
         else:
             next_mean, next_cov = ncv_predict(mean, cov, self.spec_.dt, q)
         self.next_state_ = (next_mean, next_cov)
@@ -781,14 +786,20 @@ class StateSpaceDGPT(TrackerBase):
         """Take the hybrid filter's posterior of this step's position, N(``estimate``,
         ``var``) (2,) each, in place of the tracker's own: the broadcast state becomes this
         step's prior conditioned on it (:func:`agents.state_space.condition_on_position`),
-        and so does the learning window's prior for the next step with data. Returns the
-        next-step prediction (mean, var) of the position."""
+        and so does the learning window's prior for the next step with data; with turn
+        modes, each mode's posterior becomes that mode's prior for the step conditioned on
+        it (its velocity stays the mode's), with the probabilities of the tracker's own
+        update. Returns the next-step prediction (mean, var) of the position."""
         if self.prior_state_ is None:
             raise RuntimeError("set_estimate needs a prior: call it after an update that had one")
         mean, cov = condition_on_position(*self.prior_state_, estimate, var)
         self.mean_, self.cov_ = mean, cov
         if self.turn_rates:
-            self.modes_ = self._collapsed_modes(mean, cov)
+            shape = self.prior_modes_[0].shape[:-1]  # (modes, axes)
+            mode_means, mode_covs = condition_on_position(
+                *self.prior_modes_, np.broadcast_to(estimate, shape), np.broadcast_to(var, shape)
+            )
+            self.modes_ = (mode_means, mode_covs, self.modes_[2])
         if self.data_mean_ is not None and self.data_step_ == self.last_step_:
             self.data_mean_, self.data_cov_ = mean, cov
         return self._predict_next(mean, cov)

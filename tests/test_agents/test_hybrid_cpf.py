@@ -462,10 +462,11 @@ def test_pruning_keeps_a_sensors_target_point_that_the_all_clutter_branch_outwei
 def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
     """After every step whose Poisson update ran, the wrapped NCV tracker's broadcast state
     is the prior state it predicted for the step conditioned on the hybrid's posterior
-    position, mean and variance (condition_on_position); every turn mode's posterior is that
-    state, with the probabilities of the tracker's own update; and its next prediction is
-    made from that state: the mixture of the NCV mode's (intensity q + p q_m) and each turn
-    mode's prediction, weighted by the modes' predicted probabilities."""
+    position, mean and variance (condition_on_position), and so is every mode's posterior
+    (its own prior conditioned on the same position), with the probabilities of the
+    tracker's own update; its next prediction is the IMM's from those modes: mixed through
+    the Markov chain, then the NCV mode's (intensity q + p q_m) and each turn mode's
+    prediction, weighted by the modes' predicted probabilities."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
     tracker = HybridFilter(gp="ncv")
     # the wrapped tracker is the default dgpt-rbcm, as the registered ``hybrid``'s
@@ -474,7 +475,7 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
     tracker.reset(info["problem_spec"], seed=1000)
     checked = 0
     for _ in range(60):
-        prior_state = tracker.dgpt.next_state_
+        prior_state, prior_modes = tracker.dgpt.next_state_, tracker.dgpt.next_modes_
         estimate = tracker.update(obs)
         if prior_state is not None and np.any(obs["mask"]):
             mean, cov = condition_on_position(*prior_state, estimate.mean, estimate.var)
@@ -482,16 +483,26 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
             np.testing.assert_allclose(tracker.dgpt.cov_, cov, rtol=1e-12, atol=1e-12)
             dgpt = tracker.dgpt
             mode_means, mode_covs, probabilities = dgpt.modes_
-            for mode in range(len(probabilities)):
-                np.testing.assert_array_equal(mode_means[mode], dgpt.mean_)
-                np.testing.assert_array_equal(mode_covs[mode], dgpt.cov_)
+            count = len(probabilities)
+            for mode in range(count):
+                expected = condition_on_position(
+                    prior_modes[0][mode], prior_modes[1][mode], estimate.mean, estimate.var
+                )
+                np.testing.assert_allclose(mode_means[mode], expected[0], rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(mode_covs[mode], expected[1], rtol=1e-12, atol=1e-12)
+            transition = dgpt.mode_transition
+            predicted = probabilities @ transition
+            mixed = []  # mode j's mixed posterior: weights mu_i P[i, j] / c_j
+            for j in range(count):
+                log_mixing = np.log(probabilities * transition[:, j] / predicted[j])
+                axes = [mixture_moments(log_mixing, mode_means[:, a], mode_covs[:, a]) for a in range(2)]
+                mixed.append((np.stack([m for m, _ in axes]), np.stack([c for _, c in axes])))
             manoeuvre, dt = dgpt.manoeuvre, info["problem_spec"].dt
             q = np.exp(dgpt.log_q_) + manoeuvre.probability * manoeuvre.intensity
-            predictions = [ncv_predict(mean, cov, dt, q)] + [
-                turn_predict(mean, cov, dt, dgpt.turn_process_noise, omega)
-                for omega in dgpt.turn_rates
+            predictions = [ncv_predict(*mixed[0], dt, q)] + [
+                turn_predict(*mixed[mode], dt, dgpt.turn_process_noise, omega)
+                for mode, omega in enumerate(dgpt.turn_rates, start=1)
             ]
-            predicted = probabilities @ dgpt.mode_transition
             for axis in range(2):
                 next_mean, next_cov = mixture_moments(
                     np.log(predicted),
