@@ -208,6 +208,10 @@ CANDIDATES = {
             ((0.35, -0.35, 0.52, -0.52), 0.9, 5.0, 400.0, 0.05),
         )
     },
+    "ss-rbcm-0.10": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", "manoeuvre_probability": 0.2, **MODEL_0_10},
+    ),
     "ss-point-variance": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "summary_variance": "point"},
@@ -241,7 +245,7 @@ with probability ``stay`` and have process noise q (``turn_rates`` of
 :class:`~agents.state_space_dgpt.StateSpaceDGPT`) to 0.10.0's model, ``-m<q_m>-<p>`` with
 another manoeuvre component (the search of :data:`~agents.state_space_dgpt.TURN_MODES`, all
 with the summary variance ``"point"``), and ``ss-point-variance`` is the default with that
-variance. Results
+variance; ``ss-rbcm-0.10`` is 0.10.0's ``dgpt-rbcm``. Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
