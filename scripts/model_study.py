@@ -2,8 +2,9 @@
 ``--first-seed 0``, to report a setting already chosen).
 
 Every candidate runs on S1-S4, the reference and random paths, clutter rates 1 and 5,
-sigma_z = 1, training seeds 1000 onwards. Printed per candidate and cell: 2-D RMSE (m; then
-on the steps where a sensor senses the target and on the coverage-gap steps), NRMSE
+sigma_z = 1 (``--noise-std`` for another), training seeds 1000 onwards. Printed per
+candidate and cell: 2-D RMSE (m; then on the steps where a sensor senses the target and on
+the coverage-gap steps), NRMSE
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
 (nominal 1.39) and the 3-sigma coverage (mean of the axes, nominal 99.7 %), the median
 step time, the share of fitted steps that left a hyperparameter on a bound (%, where
@@ -208,6 +209,13 @@ CANDIDATES = {
             ((0.35, -0.35, 0.52, -0.52), 0.9, 5.0, 400.0, 0.05),
         )
     },
+    **{
+        f"ss-rbcm-p{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "manoeuvre_probability": probability},
+        )
+        for probability in (0.02, 0.05, 0.1, 0.2)
+    },
     "ss-rbcm-0.10": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "manoeuvre_probability": 0.2, **MODEL_0_10},
@@ -245,7 +253,8 @@ with probability ``stay`` and have process noise q (``turn_rates`` of
 :class:`~agents.state_space_dgpt.StateSpaceDGPT`) to 0.10.0's model, ``-m<q_m>-<p>`` with
 another manoeuvre component (the search of :data:`~agents.state_space_dgpt.TURN_MODES`, all
 with the summary variance ``"point"``), and ``ss-point-variance`` is the default with that
-variance; ``ss-rbcm-0.10`` is 0.10.0's ``dgpt-rbcm``. Results
+variance; ``ss-rbcm-p<p>`` is the default with manoeuvre probability p, and
+``ss-rbcm-0.10`` is 0.10.0's ``dgpt-rbcm``. Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
@@ -294,6 +303,9 @@ def parse_args(argv):
         "--trajectories", nargs="+", choices=TRAJECTORIES, default=list(TRAJECTORIES)
     )
     parser.add_argument("--clutter-rates", nargs="+", type=float, default=list(CLUTTER_RATES))
+    parser.add_argument(
+        "--noise-std", type=float, default=1.0, help="sigma_z of every cell, m (default: 1)"
+    )
     parser.add_argument(
         "--paired-against",
         metavar="NAME",
@@ -381,7 +393,7 @@ def main(argv=None) -> int:
             scenario, trajectory, clutter = cell
             env = {
                 "scenario": scenario,
-                "noise_std": 1.0,
+                "noise_std": args.noise_std,
                 "clutter_rate": clutter,
                 "trajectory": trajectory,
                 "clutter_sensors": args.clutter_sensors,
