@@ -333,9 +333,10 @@ def condition_on_position(mean, cov, position_mean, position_var):
 def filter_window(method, steps, q, noise_var, manoeuvre: Manoeuvre | None = None):
     """Filter a window of steps from its oldest step's prior under ``q`` and ``noise_var``
     (both (..., 2): any leading batch, then the axis; a summary's variance is sigma_n^2 plus
-    its ``spread``, :class:`WindowStep`), aggregating each step's experts with ``method``; with ``manoeuvre``, each
-    axis's steps follow its two-component process noise (:class:`Manoeuvre`), the axes
-    weighing their components separately (so that they stay separate problems).
+    its ``spread``, :class:`WindowStep`), aggregating each step's experts with ``method``;
+    with ``manoeuvre``, each axis's steps follow its two-component process noise
+    (:class:`Manoeuvre`), the axes weighing their components separately (so that they stay
+    separate problems).
 
     Returns ``(log_likelihood, mean, cov)``: the window's log marginal likelihood, summed
     over its steps (..., 2), and the aggregated posterior after the last step (..., 2, 2)
