@@ -404,6 +404,7 @@ class StateSpaceDGPT(TrackerBase):
         self.data_step_ = 0
         self.particles_ = None  # (states (N, 2, 2), weights (N,), modes (N,) or None) in a gap
         self.modes_ = None  # with turn modes: (means (K, 2, 2), covs (K, 2, 2, 2), probs (K,))
+        self.mixed_ = None  # (modes_, their IMM mixing: means, covs, predicted probabilities)
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's learning steps that left q on a
@@ -722,11 +723,23 @@ class StateSpaceDGPT(TrackerBase):
                 (ncv_predict(self.mean_, self.cov_, dt, intensity), probability)
                 for intensity, probability in process_noise_components(q, manoeuvre)
             ], None
-        means, covs, probabilities = self.modes_
-        mixed_means, mixed_covs, predicted = imm_mix(
-            np.swapaxes(means, 0, 1), np.swapaxes(covs, 0, 1), probabilities, self.mode_transition
-        )
-        mixed_means, mixed_covs = np.swapaxes(mixed_means, 0, 1), np.swapaxes(mixed_covs, 0, 1)
+        if self.mixed_ is None or self.mixed_[0] is not self.modes_:
+            # the mixing depends on the modes alone: the next-step prediction and the next
+            # step share it
+            means, covs, probabilities = self.modes_
+            mixed_means, mixed_covs, predicted = imm_mix(
+                np.swapaxes(means, 0, 1),
+                np.swapaxes(covs, 0, 1),
+                probabilities,
+                self.mode_transition,
+            )
+            self.mixed_ = (
+                self.modes_,
+                np.swapaxes(mixed_means, 0, 1),
+                np.swapaxes(mixed_covs, 0, 1),
+                predicted,
+            )
+        _, mixed_means, mixed_covs, predicted = self.mixed_
         predictions = [
             (ncv_predict(mixed_means[0], mixed_covs[0], dt, intensity), predicted[0] * probability)
             for intensity, probability in process_noise_components(q, manoeuvre)
