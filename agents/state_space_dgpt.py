@@ -480,7 +480,11 @@ class StateSpaceDGPT(TrackerBase):
             self.last_step_ = step
         if self.turn_rates and self.modes_ is None:  # a new track: every mode equally likely
             count = len(self.mode_transition)
-            self.modes_ = self._collapsed_modes(self.mean_, self.cov_, np.full(count, 1.0 / count))
+            self.modes_ = (
+                np.broadcast_to(self.mean_, (count,) + self.mean_.shape),
+                np.broadcast_to(self.cov_, (count,) + self.cov_.shape),
+                np.full(count, 1.0 / count),
+            )
         dt = (step - self.last_step_) * spec.dt
         predictions, modes = self._predictions(dt, np.exp(self.log_q_), self.manoeuvre)
         if not points.shape[0]:
@@ -690,28 +694,13 @@ class StateSpaceDGPT(TrackerBase):
         self.fits_ += 1
         self.fits_at_bound_ += int(on_bound.any())
 
-    def _keep(self, step, mean, cov, ucb, modes=None) -> Estimate:
-        """Broadcast the step's posterior (with turn modes, ``modes``, the modes' posteriors
-        and probabilities; None collapses every mode to the posterior, keeping the
-        probabilities) and return the estimate with the next-step prediction (the
-        mixture's, which the hybrid filter takes as its prior)."""
-        self.mean_, self.cov_, self.last_step_ = mean, cov, step
-        if self.turn_rates:
-            self.modes_ = modes if modes is not None else self._collapsed_modes(mean, cov)
+    def _keep(self, step, mean, cov, ucb, modes) -> Estimate:
+        """Broadcast the step's posterior and ``modes`` (with turn modes, the modes'
+        posteriors and probabilities; else None) and return the estimate with the next-step
+        prediction (the mixture's, which the hybrid filter takes as its prior)."""
+        self.mean_, self.cov_, self.last_step_, self.modes_ = mean, cov, step, modes
         prior_next = self._predict_next(mean, cov)
         return Estimate(mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, prior_next)
-
-    def _collapsed_modes(self, mean, cov, probabilities=None):
-        """Every mode's posterior set to N(``mean``, ``cov``), with ``probabilities`` (the
-        current ones by default)."""
-        if probabilities is None:
-            probabilities = self.modes_[2]
-        count = len(probabilities)
-        return (
-            np.broadcast_to(mean, (count,) + mean.shape),
-            np.broadcast_to(cov, (count,) + cov.shape),
-            probabilities,
-        )
 
     def _predictions(self, dt: float, q: np.ndarray, manoeuvre: Manoeuvre | None):
         """The step's predictions ``[((mean (2, 2), cov (2, 2, 2)), prior probability),
