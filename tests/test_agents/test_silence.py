@@ -4,7 +4,7 @@ that uses it (StateSpaceDGPT(silence_particles=N), ``dgpt-bcm-silence``)."""
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import problem_spec
+from conftest import measurement_obs, problem_spec
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,6 +14,18 @@ from agents.silence import draw_particles, particle_moments, propagate_particles
 from agents.state_space import ncv_predict, turn_predict
 from agents.state_space_dgpt import StateSpaceDGPT
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
+
+
+def assert_particle_moments(states, expected_mean, expected_cov):
+    """The equally weighted particles' mean and covariance per axis each within 5 standard
+    errors of the expected ones (n particles: sqrt(1 / n) of a standard deviation for a
+    mean, about sqrt(2 / n) of a variance for a covariance entry)."""
+    n = states.shape[0]
+    mean, cov = particle_moments(states, np.full(n, 1.0 / n))
+    std = np.sqrt(np.diagonal(expected_cov, axis1=1, axis2=2))
+    np.testing.assert_array_less(np.abs(mean - expected_mean), 5 * std / np.sqrt(n))
+    scale = np.sqrt(np.einsum("ai,aj->aij", std, std) ** 2 * 2 / n)
+    np.testing.assert_array_less(np.abs(cov - expected_cov), 5 * scale)
 
 
 @pytest.mark.parametrize("probability", [0.0, 0.3])
@@ -26,12 +38,9 @@ def test_propagated_particles_have_the_ncv_prediction_moments(probability):
     n, dt, q, q_m = 40000, 2.0, np.array([0.5, 3.0]), 40.0
     start = np.array([[10.0, 2.0], [-5.0, 1.0]])
     states = propagate_particles(np.repeat(start[None], n, axis=0), dt, q, q_m, probability, rng)
-    mean, cov = particle_moments(states, np.full(n, 1.0 / n))
-    expected_mean, expected_cov = ncv_predict(start, np.zeros((2, 2, 2)), dt, q + probability * q_m)
-    std = np.sqrt(np.diagonal(expected_cov, axis1=1, axis2=2))
-    np.testing.assert_array_less(np.abs(mean - expected_mean), 5 * std / np.sqrt(n))
-    scale = np.sqrt(np.einsum("ai,aj->aij", std, std) ** 2 * 2 / n)
-    np.testing.assert_array_less(np.abs(cov - expected_cov), 5 * scale)
+    assert_particle_moments(
+        states, *ncv_predict(start, np.zeros((2, 2, 2)), dt, q + probability * q_m)
+    )
 
 
 def test_turning_particles_have_the_turn_prediction_moments():
@@ -46,16 +55,36 @@ def test_turning_particles_have_the_turn_prediction_moments():
     states = propagate_particles(
         np.repeat(start[None], 2 * n, axis=0), dt, q, 40.0, 0.3, rng, rates, q_turn
     )
-    for moved, expected in (
-        (states[:n], turn_predict(start, np.zeros((2, 2, 2)), dt, np.full(2, q_turn), omega)),
-        (states[n:], ncv_predict(start, np.zeros((2, 2, 2)), dt, q + 0.3 * 40.0)),
-    ):
-        mean, cov = particle_moments(moved, np.full(n, 1.0 / n))
-        expected_mean, expected_cov = expected
-        std = np.sqrt(np.diagonal(expected_cov, axis1=1, axis2=2))
-        np.testing.assert_array_less(np.abs(mean - expected_mean), 5 * std / np.sqrt(n))
-        scale = np.sqrt(np.einsum("ai,aj->aij", std, std) ** 2 * 2 / n)
-        np.testing.assert_array_less(np.abs(cov - expected_cov), 5 * scale)
+    zero = np.zeros((2, 2, 2))
+    assert_particle_moments(states[:n], *turn_predict(start, zero, dt, np.full(2, q_turn), omega))
+    assert_particle_moments(states[n:], *ncv_predict(start, zero, dt, q + 0.3 * 40.0))
+
+
+def test_gap_particles_move_along_the_modes_markov_chain():
+    """At a gap's first step each particle draws its mode from the modes' probabilities and
+    then moves one step along the Markov chain, so the modes' shares are p P (P: stay 0.8,
+    the rest split evenly), each within 5 binomial standard errors of n = 20000 particles.
+    With no awake sensor near the track every particle is silent, so the weights stay equal
+    and the modes' probabilities the tracker keeps are those shares exactly."""
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (1000.0, 1000.0)), clutter_rate=0.0)
+    tracker = StateSpaceDGPT(
+        turn_rates=(0.35, -0.35), mode_stay_probability=0.8, silence_particles=20000
+    )
+    tracker.reset(spec, seed=4)
+    for t in range(5):
+        tracker.update(measurement_obs(t, [[500.0 + 10.0 * t, 500.0]], [0]))
+    probabilities = np.array([0.6, 0.3, 0.1])
+    tracker.modes_ = (*tracker.modes_[:2], probabilities)
+    tracker.update(measurement_obs(5, np.empty((0, 2)), []))
+    states, weights, modes = tracker.particles_
+    assert np.ptp(weights) == 0.0
+    transition = np.array([[0.8, 0.1, 0.1], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8]])
+    expected = probabilities @ transition
+    shares = np.bincount(modes, minlength=3) / modes.size
+    np.testing.assert_array_less(
+        np.abs(shares - expected), 5.0 * np.sqrt(expected * (1.0 - expected) / modes.size)
+    )
+    np.testing.assert_allclose(tracker.modes_[2], shares, rtol=1e-12)
 
 
 def test_drawn_particles_have_the_state_moments():
