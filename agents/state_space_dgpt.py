@@ -154,7 +154,8 @@ paths) and its 3-sigma coverage to 0.01 points (seeds 1000-1005: windows 3, 4, 5
 reporting sensors). Window 4 is the cheapest of those that tie with 20 on both path modes
 (window 3 was +0.03 +- 0.03 m on the reference paths). Its likelihood is flatter than window
 20's, so q reaches a bound on fewer steps (45 % against 76 %): that is not a better-identified
-q."""
+q. (These figures are 0.10.0's model; since 0.11.0 the ``ss-rbcm-<C>`` candidates have its
+turn modes.)"""
 
 INITIAL_SPEED_STD = 25.0
 """m/s per axis: the velocity prior of a new track, the scenarios' top speed."""
@@ -195,7 +196,8 @@ probability of :data:`MANOEUVRE` lowered to 0.02. Chosen on training seeds (S1-S
 modes, clutter 1 and 5, RBCM): of turn rates +-0.35 or +-0.35 and +-0.52, stay probability
 0.8 / 0.9 / 0.95 and process noise 0.5 / 5 with the 0.10.0 manoeuvre component on seeds
 1000-1011 (``python scripts/model_study.py --first-seed 1000 --seeds 12 --candidates
-ss-rbcm-4 ss-turn2-s0.8-q0.5 ... ss-turn4-s0.95-q5 --paired-against ss-rbcm-4``), every
+ss-rbcm-0.10 ss-turn2-s0.8-q0.5 ... ss-turn4-s0.95-q5 --paired-against ss-rbcm-0.10``;
+``ss-rbcm-0.10`` is 0.10.0's default, run as ``ss-rbcm-4`` then), every
 candidate beat none on the random paths (-2.1 to -2.7 m) and most on the reference paths
 (+-0.35 with stay 0.95 and q 0.5: -0.95 +- 0.69 m); the best three again on seeds
 1012-1023 gave -0.7 to -0.9 m and -0.6 to -1.2 m. The turns gained most on S2 once the
@@ -204,9 +206,9 @@ manoeuvre component was made rarer (it explained the turns as bursts: on seeds 1
 S2's reference path at clutter 5, 14.3 m to 8.3 m); of manoeuvre probabilities 0.02 and
 0.05 (q_m 400 or 1600), stay 0.95 and turn noise 0.5, and four turn modes, all within
 +-0.65 m of each other there, the three best on seeds 1012-1023 against 0.10.0's default
-(``--first-seed 1012 --seeds 12 --candidates ss-rbcm-4 ss-turn2-s0.9-q5-m400-0.05
+(``--first-seed 1012 --seeds 12 --candidates ss-rbcm-0.10 ss-turn2-s0.9-q5-m400-0.05
 ss-turn2-s0.9-q5-m400-0.02 ss-turn2-s0.95-q5-m400-0.05 imm-pda --paired-against
-ss-rbcm-4``): this one, -2.30 +- 0.80 / -1.95 +- 0.93 m (RMSE 7.65 / 13.69 m against
+ss-rbcm-0.10``): this one, -2.30 +- 0.80 / -1.95 +- 0.93 m (RMSE 7.65 / 13.69 m against
 9.95 / 15.63 m; IMM-PDA 7.26 / 13.57 m), 3-sigma coverage on detected steps 99.43 % against
 99.08 %. Two turn modes cost two more hypotheses per step than none; +-0.52 rad/s (S3's
 rate) as well was not better (+0.65 +- 0.58 / +0.06 +- 0.30 m on seeds 1000-1011) and costs

@@ -172,6 +172,7 @@ CANDIDATES = {
                 "turn_rates": rates,
                 "mode_stay_probability": stay,
                 "turn_process_noise": q,
+                "manoeuvre_probability": 0.2,
                 "summary_variance": "point",
             },
         )
