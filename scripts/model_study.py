@@ -217,9 +217,29 @@ CANDIDATES = {
         )
         for probability in (0.02, 0.05, 0.1, 0.2)
     },
+    **{
+        f"ss-rbcm-silence-{n}" + ("-ba" if prior == "boundary-avoiding" else ""): (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "silence_particles": n, "process_noise_prior": prior},
+        )
+        for n in (1000,)
+        for prior in ("none", "boundary-avoiding")
+    },
+    **{
+        f"ss-rbcm-s{stay:g}-q{q:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "mode_stay_probability": stay, "turn_process_noise": q},
+        )
+        for stay in (0.9, 0.95, 0.98)
+        for q in (0.5, 5.0)
+    },
     "ss-rbcm-0.10": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "manoeuvre_probability": 0.2, **MODEL_0_10},
+    ),
+    "ss-rbcm-boundary-avoiding": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", "process_noise_prior": "boundary-avoiding"},
     ),
     "ss-point-variance": (
         "agents.state_space_dgpt:StateSpaceDGPT",
@@ -239,7 +259,7 @@ inside the hybrid filter), the paper's zero mean with and without bounds, the NC
 every expert's state integrated out (distributed with BCM / RBCM, and centralized), and the
 NCV GP in state-space form with the broadcast posterior as every expert's prior (the default
 since 0.9.0, :mod:`agents.state_space_dgpt`: ``ss-<aggregation>-<C>`` with its manoeuvre
-component, ``ss-rbcm-4`` being ``dgpt-rbcm`` (``ss-rbcm-20`` up to 0.9.0); ``ss-manoeuvre-<q_m>-<p>`` with other
+component, ``ss-rbcm-4`` being ``dgpt-rbcm`` of 0.10.0-0.11.0 (``ss-rbcm-20`` up to 0.9.0); ``ss-manoeuvre-<q_m>-<p>`` with other
 manoeuvre settings, ``ss-plain-bcm-<C>`` without, ``ss-silence-<N>`` conditioned in coverage
 gaps on the silence of the sensors with N particles, ``ss-rbcm-fixed-q<q>`` with q fixed
 instead of learnt over the last C steps with data). Since 0.10.0 these associate the
@@ -255,7 +275,11 @@ with probability ``stay`` and have process noise q (``turn_rates`` of
 another manoeuvre component (the search of :data:`~agents.state_space_dgpt.TURN_MODES`, all
 with the summary variance ``"point"``), and ``ss-point-variance`` is the default with that
 variance; ``ss-rbcm-p<p>`` is the default with manoeuvre probability p, and
-``ss-rbcm-0.10`` is 0.10.0's ``dgpt-rbcm``. Results
+``ss-rbcm-0.10`` is 0.10.0's ``dgpt-rbcm``. ``ss-rbcm-s<stay>-q<q>`` has other turn-mode
+settings, ``ss-rbcm-boundary-avoiding`` climbs q with the boundary-avoiding prior
+(:data:`~agents.state_space_dgpt.PROCESS_NOISE_PRIORS`), and ``ss-rbcm-silence-1000`` (with
+``-ba``: and that prior) conditions on the silence of the sensors in coverage gaps with 1000
+particles: it is ``dgpt-rbcm`` since 0.12.0. Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (

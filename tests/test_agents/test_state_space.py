@@ -338,6 +338,25 @@ def test_newton_step_solves_a_quadratic_and_respects_its_limits():
     np.testing.assert_allclose(newton_step(infinite_below, h, 1.0), [1.0])
 
 
+@pytest.mark.parametrize("prior, shift", [("none", 0.0), ("boundary-avoiding", 0.25)])
+def test_the_climb_lands_on_the_penalised_maximum(prior, shift):
+    """A window likelihood -a (log q - u0)^2 per axis: without a prior the climb lands on
+    u0; the boundary-avoiding prior adds (1/2) log q, whose maximum is u0 + 1 / (4 a) (by
+    hand: -2 a (u - u0) + 1/2 = 0). One Newton step from anywhere within reach is exact for
+    a quadratic. A flat likelihood moves q up by the largest step with the prior and not at
+    all without."""
+    a, u0 = np.array([1.0, 0.5]), np.array([-2.0, 1.0])
+    tracker = StateSpaceDGPT(process_noise_prior=prior)
+    tracker.reset(problem_spec())
+    tracker.log_q_ = np.array([-1.5, 0.8])
+    u = tracker.log_q_[None, :] + np.array([0.0, LOG_STEP, -LOG_STEP])[:, None]
+    tracker._climb(-a * (u - u0) ** 2)
+    np.testing.assert_allclose(tracker.log_q_, u0 + shift / a, rtol=1e-9)
+    tracker.log_q_ = np.zeros(2)
+    tracker._climb(np.zeros((3, 2)))
+    np.testing.assert_allclose(tracker.log_q_, np.full(2, 1.0 if shift else 0.0))
+
+
 @pytest.mark.parametrize("association", ["joint", "local"])
 def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(association):
     """One tracker step with data, then one without, recomputed densely: per component, the
@@ -649,6 +668,7 @@ def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
         ({"turn_rates": (0.35, float("nan"))}, r"turn_rates\[1\]"),
         ({"turn_process_noise": -1.0}, "turn_process_noise"),
         ({"mode_stay_probability": 1.5}, "mode_stay_probability"),
+        ({"process_noise_prior": "gamma"}, "process_noise_prior"),
     ],
 )
 def test_bad_arguments_name_themselves(kwargs, name):
