@@ -276,8 +276,15 @@ class HybridFilter(TrackerBase):
         self.prune_tolerance = check_real("prune_tolerance", prune_tolerance, low=0.0, high=1.0)
         self.scan_model = check_choice("scan_model", scan_model, SCAN_MODELS)
         self.gp = check_choice("gp", gp, GP_MODELS)
-        if self.gp == "ncv":  # the registered ``hybrid`` wraps the default ``dgpt-rbcm``
+        if self.gp == "ncv":  # the registered ``hybrid`` wraps ``dgpt-rbcm``'s model
             dgpt_kwargs.setdefault("aggregation", "rbcm")
+            if dgpt_kwargs.get("silence_particles", 0):
+                # set_estimate replaces the DGPT's posterior, which a gap's particles carry
+                raise ValueError(
+                    "silence_particles: the hybrid filter's DGPT predicts through coverage "
+                    "gaps without the silence (0); got "
+                    f"{dgpt_kwargs['silence_particles']!r}"
+                )
         self.dgpt = GP_MODELS[self.gp](delta=delta, **dgpt_kwargs)
         inputs = self.dgpt.inputs if self.gp == "se" else "ncv"
         self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{inputs}"

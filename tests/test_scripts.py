@@ -76,7 +76,7 @@ def test_evaluate_inputs_expand_gp_trackers_and_keep_the_others():
     assert with_inputs(["gp", "dgpt-rbcm"], ["tgp", "stgp"]) == ["gp", "dgpt-rbcm"]
     with pytest.raises(ValueError, match="temporal inputs only.*dgpt-rbcm-stgp-trend"):
         with_inputs(["dgpt-rbcm"], ["stgp"])
-    assert with_inputs(["dgpt-bcm-silence", "imm-pda"], ["stgp"]) == ["dgpt-bcm-silence", "imm-pda"]
+    assert with_inputs(["hybrid", "imm-pda"], ["stgp"]) == ["hybrid", "imm-pda"]
 
 
 def test_evaluate_rejects_unknown_names_with_the_valid_ones():

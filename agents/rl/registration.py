@@ -71,6 +71,7 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
                     "manoeuvre_probability": 0.5,
                     "turn_rates": (),
                     "summary_variance": "point",
+                    "silence_particles": 0,
                 },
             ),
         ),

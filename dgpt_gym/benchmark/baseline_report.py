@@ -32,7 +32,7 @@ FLOOR = "clairvoyant"
 COMPARISON_TRACKERS = (
     ("clairvoyant", "imm-pda", "pda")
     + PAPER_GP_TRACKERS
-    + ("dgpt-bcm-silence", "hybrid", "hybrid-trend", "hybrid-paper", "cpf")
+    + ("hybrid", "hybrid-trend", "hybrid-paper", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
 

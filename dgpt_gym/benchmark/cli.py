@@ -2,7 +2,7 @@
 
 With no options it runs the quick grid (S1-S4, clutter rates 1 and 5, sigma_z = 1, 10 runs of
 the trackers of :data:`dgpt_gym.benchmark.sweep.QUICK_SWEEP`: the standard GP, DGPT-RBCM and
-DGPT-GPoE, DGPT-BCM with the silence of the sensors, the pooled-trend DGPT-RBCM, the hybrid
+DGPT-GPoE, the pooled-trend DGPT-RBCM, the hybrid
 filter around each DGPT-RBCM, the CPF, the IMM-PDA and the clairvoyant floor; about a minute
 on 2 cores) and prints a table per cell: NRMSE with its 95 %
 interval over runs beside the paper's value, RMSE, the ratio to the clairvoyant floor, ANEES,
@@ -103,7 +103,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="the paper's full grid: S1-S4, sigma_z 1 2 4, clutter 1 5, standard GP, "
         "DGPT-RBCM and DGPT-GPoE with the default model and with the pooled trend (TGP and "
-        "STGP inputs), dgpt-bcm-silence, KF-PDA, IMM-PDA and the clairvoyant floor; the "
+        "STGP inputs), KF-PDA, IMM-PDA and the clairvoyant floor; the "
         "-paper trackers, the hybrid filters and the CPF at sigma_z 1 (clutter 5 is Fig. 8); "
         "100 runs each",
     )

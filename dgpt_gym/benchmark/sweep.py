@@ -144,7 +144,6 @@ QUICK_SWEEP = (
             "gp",
             "dgpt-rbcm",
             "dgpt-gpoe",
-            "dgpt-bcm-silence",
             "dgpt-rbcm-trend",
             "hybrid",
             "hybrid-trend",
@@ -156,14 +155,13 @@ QUICK_SWEEP = (
     ),
 )
 """``scripts/evaluate.py`` with no options (and ``make evaluate``): about a minute on 2
-cores. The paper's approaches with the default model (the NCV GP in state-space form),
-``dgpt-bcm-silence``, which also uses the silence of the sensors in coverage gaps, the
-pooled SE trend of dgpt-gym 0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the
+cores. The paper's approaches with the default model (the NCV GP in state-space form,
+conditioned on the silence of the sensors in coverage gaps), the pooled SE trend of dgpt-gym 0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the
 CPF, IMM-PDA and the clairvoyant floor."""
 
 PAPER_SWEEP = (
     Grid(
-        trackers=PAPER_GP_TRACKERS + ("dgpt-bcm-silence",) + STANDARD_TRACKERS,
+        trackers=PAPER_GP_TRACKERS + STANDARD_TRACKERS,
         noise_levels=(1.0, 2.0, 4.0),
         runs=100,
     ),
@@ -177,7 +175,7 @@ PAPER_SWEEP = (
 )
 """``--paper``: Tables II-IX (the paper's three approaches with the default model, and with
 the pooled SE trend and temporal or spatio-temporal inputs; sigma_z in {1, 2, 4}, clutter 1
-and 5) with ``dgpt-bcm-silence``, the standard trackers and the clairvoyant floor on every
+and 5) with the standard trackers and the clairvoyant floor on every
 cell; the paper's model as printed (``-paper`` ids) at sigma_z = 1; and the hybrid filter
 around DGPT-RBCM with each model, and the CPF, at sigma_z = 1 and both clutter rates (Fig. 8
 is the clutter-5 cell); 100 Monte Carlo runs each."""

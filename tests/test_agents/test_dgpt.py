@@ -107,7 +107,7 @@ def test_same_seed_same_estimates():
 @pytest.mark.parametrize(
     "tracker_id",
     [
-        *("gp", "dgpt-rbcm", "dgpt-gpoe", "dgpt-bcm", "dgpt-poe", "dgpt-bcm-silence"),
+        *("gp", "dgpt-rbcm", "dgpt-gpoe", "dgpt-bcm", "dgpt-poe"),
         *("dgpt-poe-trend", "dgpt-bcm-trend", "dgpt-gpoe-trend", "dgpt-rbcm-stgp-trend"),
         *("gp-trend", "gp-stgp-trend"),
     ],

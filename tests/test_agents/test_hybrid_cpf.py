@@ -305,6 +305,12 @@ def test_hybrid_rejects_an_unknown_variant():
         HybridFilter(variant="approximate")
 
 
+def test_hybrid_rejects_silence_particles_in_its_dgpt():
+    with pytest.raises(ValueError, match="silence_particles"):
+        HybridFilter(silence_particles=1000)
+    assert HybridFilter(silence_particles=0).dgpt.silence_particles == 0
+
+
 class RecordingHybrid(HybridFilter):
     """Records the wrapped DGPT's own estimate at every step."""
 

@@ -1,5 +1,5 @@
 """The silence of the sensors in coverage gaps (agents/silence.py) and the state-space DGPT
-that uses it (StateSpaceDGPT(silence_particles=N), ``dgpt-bcm-silence``)."""
+that uses it (StateSpaceDGPT(silence_particles=N), every registered ``dgpt-*`` and ``gp``)."""
 
 import gymnasium as gym
 import numpy as np
@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 import dgpt_gym  # noqa: F401  (registers the environment)
 from agents.particles import kernel_scale, resample_systematic
+from agents.registration import SILENCE_PARTICLES
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import ncv_predict, turn_predict
 from agents.state_space_dgpt import StateSpaceDGPT
@@ -254,9 +255,43 @@ def test_bad_particle_counts_name_the_argument(value):
         StateSpaceDGPT(silence_particles=value)
 
 
-def test_the_registered_tracker_uses_the_silence():
-    tracker = dgpt_gym.make_tracker("dgpt-bcm-silence")
-    assert tracker.silence_particles > 0 and tracker.name == "dgpt-bcm-silence"
+@pytest.mark.parametrize("tracker_id", ["gp", "dgpt-rbcm", "dgpt-gpoe", "dgpt-bcm", "dgpt-poe"])
+def test_the_registered_trackers_use_the_silence(tracker_id):
+    tracker = dgpt_gym.make_tracker(tracker_id)
+    assert tracker.silence_particles == SILENCE_PARTICLES and tracker.name == tracker_id
+
+
+def test_the_gap_bound_holds_for_the_particles_kernel_density():
+    """On each step of a gap, P(|x - estimate| > UCB) <= delta per axis when x follows the
+    particles' kernel density (weights, kernel covariance
+    :func:`agents.particles.kernel_scale` times the predicted particles' covariance, which
+    the estimate's variance exceeds the particles' by): 200000 draws per step, so a miss
+    rate at delta = 0.003 has a standard error of 1.2e-4 and the test allows 5 of them. A
+    third of the UCB is not a bound: it misses more than delta plus that tolerance on every
+    step (the bound is Lemma 1 on every particle's kernel, so it reaches past the farthest
+    weighted particle: half of it still held on some steps here), so a half-width 10x too
+    wide or 10x too narrow fails."""
+    tracker = StateSpaceDGPT(silence_particles=300)
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0, trajectory="fixed")
+    observation, info = env.reset(seed=1001)
+    tracker.reset(info["problem_spec"], seed=1001)
+    rng, n_draws, checked = np.random.default_rng(11), 200000, 0
+    for _ in range(info["problem_spec"].n_steps):
+        estimate = tracker.update(observation)
+        if tracker.particles_ is not None:
+            states, weights, _ = tracker.particles_
+            kernel_var = estimate.var - particle_moments(states, weights)[1][:, 0, 0]
+            chosen = rng.choice(weights.size, size=n_draws, p=weights)
+            draws = states[chosen, :, 0] + rng.normal(size=(n_draws, 2)) * np.sqrt(kernel_var)
+            offset = np.abs(draws - estimate.mean)
+            tolerance = 5 * np.sqrt(tracker.delta / n_draws)
+            assert np.all(np.mean(offset > estimate.ucb, axis=0) <= tracker.delta + tolerance)
+            assert np.all(np.mean(offset > estimate.ucb / 3, axis=0) > tracker.delta + tolerance)
+            checked += 1
+        observation, _, terminated, truncated, _ = env.step(estimate.mean)
+        if terminated or truncated:
+            break
+    assert checked >= 10
 
 
 def test_kernel_scale_is_silvermans_rule():

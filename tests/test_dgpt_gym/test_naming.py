@@ -43,9 +43,14 @@ def test_the_paper_sets_are_registered():
 
 @pytest.mark.parametrize(
     "old, new",
-    [("dgpt-bcm-ncv", "dgpt-bcm"), ("gp-stgp", "gp-stgp-trend"), ("hybrid-ncv", "hybrid")],
+    [
+        ("dgpt-bcm-ncv", "dgpt-bcm"),
+        ("gp-stgp", "gp-stgp-trend"),
+        ("hybrid-ncv", "hybrid"),
+        ("dgpt-bcm-silence", "dgpt-bcm"),
+    ],
 )
 def test_a_renamed_id_says_its_new_name(old, new):
-    pattern = rf"renamed in dgpt-gym 0\.9\.0: use {re.escape(new)}(\s|$)"
+    pattern = rf"renamed or retired: use {re.escape(new)}(\s|$)"
     with pytest.raises(ValueError, match=pattern):
         make_tracker(old)

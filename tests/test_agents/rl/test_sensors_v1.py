@@ -119,7 +119,7 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor(env_id):
 def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
     """The same class; v2 fixes ``tracker="dgpt-bcm"`` (window 20) as 0.9.0 built it (eq.
     (27) association, manoeuvre probability 0.5, no turn modes, a summary's variance
-    sigma_n^2 + its spread), so the same seed and actions give the
+    sigma_n^2 + its spread, no silence particles), so the same seed and actions give the
     episode of v1 made with those arguments."""
     from agents.state_space_dgpt import StateSpaceDGPT
 
@@ -128,6 +128,7 @@ def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
         "manoeuvre_probability": 0.5,
         "turn_rates": (),
         "summary_variance": "point",
+        "silence_particles": 0,
     }
     v2 = gym.make("DGPTrackSensors-v2", scenario="S3").unwrapped
     v1 = gym.make(
@@ -135,6 +136,7 @@ def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
     ).unwrapped
     assert isinstance(v2.tracker, StateSpaceDGPT) and v2.tracker.window == 20
     assert v2.tracker.association == "local" and v2.tracker.manoeuvre.probability == 0.5
+    assert v2.tracker.silence_particles == 0
     assert type(gym.make(ENV_ID).unwrapped.tracker).__name__ == "DGPT"
     for env in (v1, v2):
         env.reset(seed=7)
