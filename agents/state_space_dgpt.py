@@ -475,9 +475,20 @@ class StateSpaceDGPT(TrackerBase):
         ]
 
     def _observe(self, obs: dict):
-        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb, modes)`` for :meth:`_keep` after
-        the learning, or None when the step is finished (no data; its estimate is in
-        ``last_estimate_``)."""
+        """Steps 1-4 of a step. Returns ``(step, mean, cov, ucb, modes, var)`` for
+        :meth:`_keep` after the learning, or None when the step is finished (no data; its
+        estimate is in ``last_estimate_``). ``var`` is the estimate's variance on a step with
+        data: the variance of its error under the model, the mixture over the hypotheses of
+        each aggregate's (:func:`agents.state_space.aggregate_error_var`, which the UCB uses
+        too) and its distance to the estimate. PoE, GPoE and RBCM have a posterior variance
+        of their own that is not their error's (0.11.0 reported it: RBCM's median NEES was
+        0.66-0.68 on S1 at sigma_z = 2 and 4); BCM's posterior variance is its error's, and
+        BCM reports it (var is None). The error variance takes the broadcast prior's
+        variance as the prior error's, which holds for BCM and nearly for RBCM but not for
+        PoE and GPoE, whose broadcast posteriors are too narrow: with targets drawn from the
+        model their mean NEES stays above its nominal 2 (tests/test_agents/test_state_space.py;
+        GPoE 2.6 and PoE 3.7 with this variance, 2.9 and 8.5 with their own, RBCM 1.9
+        against 1.4)."""
         if getattr(self, "spec_", None) is None:
             raise RuntimeError("call reset(spec) before update(obs)")
         spec = self.spec_
@@ -560,14 +571,14 @@ class StateSpaceDGPT(TrackerBase):
         self.expert_sensors_ = hypotheses["sensors"]
         self.expert_means_ = hypotheses["expert_means"][best]
         self.expert_covs_ = hypotheses["expert_covs"][best]
-        ucb = agg.mixture_half_width(
-            np.exp(log_weights - np.logaddexp.reduce(log_weights)),
-            hypotheses["mean"][..., 0] - mean[:, 0],
-            hypotheses["error_std"],
-            self.delta,
-        )
+        weights = np.exp(log_weights - np.logaddexp.reduce(log_weights))
+        offsets = hypotheses["mean"][..., 0] - mean[:, 0]  # (H, 2)
+        ucb = agg.mixture_half_width(weights, offsets, hypotheses["error_std"], self.delta)
+        error_var = None
+        if self.aggregation != "bcm":  # BCM's posterior variance is its error variance
+            error_var = weights @ (hypotheses["error_std"] ** 2 + offsets**2)
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
-        return step, mean, cov, ucb, mode_posteriors
+        return step, mean, cov, ucb, mode_posteriors, error_var
 
     def _silent_step(self, step: int, awake) -> Estimate:
         """A step on which no awake sensor reports (:mod:`agents.silence`): the gap's
@@ -741,13 +752,15 @@ class StateSpaceDGPT(TrackerBase):
         self.fits_ += 1
         self.fits_at_bound_ += int(on_bound.any())
 
-    def _keep(self, step, mean, cov, ucb, modes) -> Estimate:
+    def _keep(self, step, mean, cov, ucb, modes, var=None) -> Estimate:
         """Broadcast the step's posterior and ``modes`` (with turn modes, the modes'
         posteriors and probabilities; else None) and return the estimate with the next-step
-        prediction (the mixture's, which the hybrid filter takes as its prior)."""
+        prediction (the mixture's, which the hybrid filter takes as its prior). ``var``
+        (2,): the estimate's variance when it is not the posterior's (see :meth:`_observe`)."""
         self.mean_, self.cov_, self.last_step_, self.modes_ = mean, cov, step, modes
         prior_next = self._predict_next(mean, cov)
-        return Estimate(mean[:, 0].copy(), cov[:, 0, 0].copy(), ucb, prior_next)
+        var = cov[:, 0, 0] if var is None else var
+        return Estimate(mean[:, 0].copy(), var.copy(), ucb, prior_next)
 
     def _predictions(self, dt: float, q: np.ndarray, manoeuvre: Manoeuvre | None):
         """The step's predictions ``[((mean (2, 2), cov (2, 2, 2)), prior probability),

@@ -773,3 +773,42 @@ def test_the_centralized_gp_is_the_bcm_aggregate_exactly():
     assert not np.array_equal(centralized.mean, rbcm.mean)
     with pytest.raises(ValueError, match="aggregation"):
         dgpt_gym.make_tracker("gp", aggregation="rbcm")
+
+
+@pytest.mark.parametrize("aggregation", ["rbcm", "bcm"])
+def test_the_reported_variance_is_the_estimates_error_variance_in_the_model(aggregation):
+    """Targets drawn from the tracker's own NCV model (q = 2, no manoeuvres, no turns, q
+    not learnt), four sensors each reporting the target with sigma_n = 1 and no clutter: the
+    2-D NEES of the estimate at the 12th step is chi-square with 2 degrees of freedom, mean 2
+    and standard deviation 2, so the mean over 400 independent episodes lies within
+    5 x 2 / sqrt(400) = 0.5 of 2. RBCM's own posterior variance is not its error's (mean
+    NEES 1.36 here: too wide); the error variance under the model
+    (:func:`agents.state_space.aggregate_error_var`) is what the tracker reports."""
+    q, n_sensors, n_episodes, n_steps = 2.0, 4, 400, 12
+    transition = np.array([[1.0, 1.0], [0.0, 1.0]])
+    process_cov = q * np.array([[1.0 / 3.0, 1.0 / 2.0], [1.0 / 2.0, 1.0]])  # dt = 1
+    spec = problem_spec(
+        sensor_positions=[(0.0, 0.0), (30.0, 0.0), (0.0, 30.0), (30.0, 30.0)],
+        clutter_rate=0.0,
+        n_steps=n_steps,
+    )
+    rng = np.random.default_rng(4)
+    nees = []
+    for episode in range(n_episodes):
+        tracker = StateSpaceDGPT(
+            aggregation=aggregation,
+            turn_rates=(),
+            manoeuvre_intensity=0.0,
+            learn_process_noise=False,
+            process_noise=q,
+        )
+        tracker.reset(spec, seed=episode)
+        state = np.array([[15.0, 2.0], [15.0, -1.0]])  # axes, (position, velocity)
+        for t in range(n_steps):
+            if t:
+                noise = rng.multivariate_normal(np.zeros(2), process_cov, size=2)
+                state = state @ transition.T + noise
+            points = state[:, 0] + rng.normal(size=(n_sensors, 2))
+            estimate = tracker.update(measurement_obs(t, points, np.arange(n_sensors)))
+        nees.append(np.sum((estimate.mean - state[:, 0]) ** 2 / estimate.var))
+    assert abs(np.mean(nees) - 2.0) < 5 * 2.0 / np.sqrt(n_episodes), np.mean(nees)
