@@ -226,6 +226,17 @@ CANDIDATES = {
         for prior in ("none", "boundary-avoiding")
     },
     **{
+        f"ss-rbcm-silence-1000-p{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "silence_particles": 1000, "manoeuvre_probability": probability},
+        )
+        for probability in (0.05, 0.1)
+    },
+    "ss-rbcm-silence-1000-turn4": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", "silence_particles": 1000, "turn_rates": (0.35, -0.35, 0.52, -0.52)},
+    ),
+    **{
         f"ss-rbcm-s{stay:g}-q{q:g}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
             {"aggregation": "rbcm", "mode_stay_probability": stay, "turn_process_noise": q},
