@@ -156,7 +156,8 @@ QUICK_SWEEP = (
 )
 """``scripts/evaluate.py`` with no options (and ``make evaluate``): about a minute on 2
 cores. The paper's approaches with the default model (the NCV GP in state-space form,
-conditioned on the silence of the sensors in coverage gaps), the pooled SE trend of dgpt-gym 0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the
+conditioned on the silence of the sensors in coverage gaps), the pooled SE trend of dgpt-gym
+0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the
 CPF, IMM-PDA and the clairvoyant floor."""
 
 PAPER_SWEEP = (
