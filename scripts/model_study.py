@@ -2,7 +2,8 @@
 ``--first-seed 0``, to report a setting already chosen).
 
 Every candidate runs on S1-S4, the reference and random paths, clutter rates 1 and 5,
-sigma_z = 1 (``--noise-std`` for another), training seeds 1000 onwards. Printed per
+sigma_z = 1 (``--noise-std`` for another), training seeds 1000 onwards; ``--scenarios``,
+``--trajectories`` and ``--clutter-rates`` keep only some of those cells. Printed per
 candidate and cell: 2-D RMSE (m; then on the steps where a sensor senses the target and on
 the coverage-gap steps), NRMSE
 (%, mean of the axes), on steps where a sensor senses the target the median 2-D NEES
@@ -335,6 +336,7 @@ def parse_args(argv):
         default="detecting",
         help="which sensors report clutter (the environment's clutter_sensors)",
     )
+    parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
     parser.add_argument(
         "--trajectories", nargs="+", choices=TRAJECTORIES, default=list(TRAJECTORIES)
     )
@@ -425,7 +427,7 @@ def main(argv=None) -> int:
     units, keys = [], []
     for name in args.candidates:
         entry_point, kwargs = CANDIDATES[name]
-        for cell in itertools.product(SCENARIOS, args.trajectories, args.clutter_rates):
+        for cell in itertools.product(args.scenarios, args.trajectories, args.clutter_rates):
             scenario, trajectory, clutter = cell
             env = {
                 "scenario": scenario,
