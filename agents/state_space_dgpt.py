@@ -70,7 +70,12 @@ and cannot tell it from the summaries' noise.
 With clutter at every sensor (``clutter_sensors="all"``), the sensors that do not sense the
 target are screened out before step 2, and tracks start and restart from measurements that
 the other sensors covering them confirm, as DGPT's do (:class:`agents.screening.ClutterScreen`
-with the broadcast prediction).
+with the broadcast prediction). With ``silence_particles`` = N > 0 (the registered trackers)
+the screen weighs all scans together (N positions drawn from the prediction), a step on
+which it admits no sensor is a gap step whose particles are weighted by the likelihood ratio
+of every scan of the step (:func:`agents.screening.scan_log_likelihood_ratios`; the silence
+is its case without points), and a step without a track returns the posterior of its scans
+alone (:meth:`_scan_estimate`) instead of the area's centre.
 
 sigma_n^2 is the sensors' noise variance, ``spec.model_noise_std ** 2`` (the hybrid filter
 and the Kalman trackers use it too); only q is learnt. Steps without measurements only
@@ -89,7 +94,7 @@ import numpy as np
 from agents import aggregation as agg
 from agents.gating import gate_measurements, target_probabilities
 from agents.particles import kernel_scale, resample_systematic
-from agents.screening import ClutterScreen
+from agents.screening import ClutterScreen, scan_log_likelihood_ratios, scan_posterior
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
     Manoeuvre,
@@ -309,6 +314,8 @@ class StateSpaceDGPT(TrackerBase):
             variance in the gap are the moments of the particles' kernel density
             (:meth:`_silent_step`) and the UCB holds under that kernel density. The registered
             ``dgpt-*`` and ``gp`` use N = 1000 (:data:`agents.registration.SILENCE_PARTICLES`).
+            With ``clutter_sensors="all"`` N also sets the screen's draws and the gap
+            particles weigh every scan (module docstring).
         association: ``"joint"`` or ``"local"`` (:data:`ASSOCIATIONS`, step 2 of the module
             docstring).
         turn_rates: omega (rad/s) of each coordinated-turn mode beside the NCV mode (empty:
@@ -410,8 +417,10 @@ class StateSpaceDGPT(TrackerBase):
         self.spec_ = spec
         self.noise_var_ = spec.model_noise_std**2
         self.log_q_ = np.full(2, np.log(self.process_noise))
-        self.screen_ = ClutterScreen(spec, self.admission_probability)
-        self.rng_ = np.random.default_rng(seed)  # the gap particles' draws
+        self.rng_ = np.random.default_rng(seed)  # the gap particles' and the screen's draws
+        self.screen_ = ClutterScreen(
+            spec, self.admission_probability, self.silence_particles, self.rng_
+        )
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
@@ -496,20 +505,25 @@ class StateSpaceDGPT(TrackerBase):
         self.prior_state_ = self.next_state_
         self.prior_modes_ = self.next_modes_
         mask = np.asarray(obs["mask"]).astype(bool)
-        if self.silence_particles and self.mean_ is not None:
-            if not mask.any():
-                self.last_estimate_ = self._silent_step(step, obs.get("awake"))
-                return None
-            self.particles_ = None  # a gap ends; its last step kept the particles' moments
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
+        scan = None  # with clutter at every sensor: every report of the step
         if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
+            scan = (points, sensors)
             keep, started = self.screen_.screen(
                 points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
             )
             points, sensors = points[keep], sensors[keep]
             if started:
                 self._start_track()
+        if self.silence_particles and not points.shape[0]:
+            if self.mean_ is not None:
+                self.last_estimate_ = self._silent_step(step, obs.get("awake"), scan)
+                return None
+            if scan is not None:
+                self.last_estimate_ = self._scan_estimate(*scan, obs.get("awake"))
+                return None
+        self.particles_ = None  # a gap ends; its last step kept the particles' moments
         if self.mean_ is None:
             if not points.shape[0]:
                 self.last_estimate_ = Estimate.uninformed(spec)
@@ -580,11 +594,14 @@ class StateSpaceDGPT(TrackerBase):
         self.data_mean_, self.data_cov_, self.data_step_ = mean, cov, step
         return step, mean, cov, ucb, mode_posteriors, error_var
 
-    def _silent_step(self, step: int, awake) -> Estimate:
+    def _silent_step(self, step: int, awake, scan=None) -> Estimate:
         """A step on which no awake sensor reports (:mod:`agents.silence`): the gap's
         particles carried to this step under the two-component process noise, weighted by
         whether they lie where no awake sensor senses them, and resampled when their
-        effective number falls below half. The estimate is the moments of their kernel
+        effective number falls below half. With clutter at every sensor, ``scan`` = (points,
+        sensors) holds every report of a step on which the screen admitted no sensor, and
+        the weights are the scans' likelihood ratio instead (:meth:`_scan_likelihood`),
+        which is that indicator when nothing is reported. The estimate is the moments of their kernel
         density: Gaussian kernels of covariance :func:`agents.particles.kernel_scale` times
         the predicted particles' covariance (Silverman's bandwidth), so that a few surviving
         particles do not report a variance near zero. The resampled particles are not
@@ -647,9 +664,14 @@ class StateSpaceDGPT(TrackerBase):
         if awake is not None:
             sensor_positions = sensor_positions[np.asarray(awake, dtype=bool)]
         kernel_cov = kernel_scale(weights.size) * particle_moments(states, weights)[1]
-        silent = silent_region(states[..., 0], sensor_positions, spec.sensing_range, spec.area)
-        if np.any(silent & (weights > 0)):
-            weights = weights * silent
+        if scan is None:
+            likelihood = silent_region(
+                states[..., 0], sensor_positions, spec.sensing_range, spec.area
+            )
+        else:
+            likelihood = self._scan_likelihood(states[..., 0], *scan, awake)
+        if np.any((likelihood > 0) & (weights > 0)):
+            weights = weights * likelihood
             weights = weights / weights.sum()
         if 1.0 / np.sum(weights**2) < weights.size / 2:
             chosen = resample_systematic(weights, self.rng_)
@@ -679,6 +701,61 @@ class StateSpaceDGPT(TrackerBase):
             probabilities = np.maximum(probabilities, 1e-300)
             mode_states = (mode_means, mode_covs, probabilities / probabilities.sum())
         return self._keep(step, mean, cov, ucb, mode_states)
+
+    def _scan_likelihood(self, positions, points, sensors, awake) -> np.ndarray:
+        """The likelihood ratio of a step's scans (every report, clutter at every sensor)
+        at ``positions`` (N, 2), scaled to a largest value of 1, and 0 outside the area
+        (:func:`agents.screening.scan_log_likelihood_ratios`; all zero if the scans rule
+        out every position)."""
+        spec = self.spec_
+        log_ratio, _, _ = scan_log_likelihood_ratios(
+            positions,
+            points,
+            sensors,
+            np.asarray(spec.sensor_positions),
+            spec.sensing_range,
+            self.noise_var_,
+            spec.detection_rate,
+            spec.clutter_density,
+            awake,
+        )
+        inside = np.all((positions >= 0.0) & (positions <= spec.area), axis=1)
+        log_ratio = np.where(inside, log_ratio, -np.inf)
+        if not np.any(np.isfinite(log_ratio)):
+            return np.zeros(positions.shape[0])
+        return np.exp(log_ratio - np.max(log_ratio))
+
+    def _scan_estimate(self, points, sensors, awake) -> Estimate:
+        """A step without a track, with clutter at every sensor, on which no track starts:
+        the moments of the position's posterior given this step's scans and a prior
+        uniform over the area (:func:`agents.screening.scan_posterior`, 2N weighted
+        positions), with kernels of :func:`agents.particles.kernel_scale` times its
+        covariance as in :meth:`_silent_step`, and the UCB under that kernel density. The
+        uninformed estimate if the scans rule out every drawn position. Before 0.13.0 such
+        steps returned the area's centre, the largest share of the squared error with
+        clutter at every sensor."""
+        posterior = scan_posterior(
+            points,
+            sensors,
+            self.spec_,
+            self.noise_var_,
+            2 * self.silence_particles,
+            self.rng_,
+            awake,
+        )
+        if posterior is None:
+            return Estimate.uninformed(self.spec_)
+        positions, weights = posterior
+        mean = weights @ positions
+        var = weights @ (positions - mean) ** 2
+        kernel_var = kernel_scale(weights.size, dimension=2) * var
+        ucb = agg.mixture_half_width(
+            weights,
+            positions - mean,
+            np.broadcast_to(np.sqrt(kernel_var), positions.shape),
+            self.delta,
+        )
+        return Estimate(mean, var + kernel_var, ucb)
 
     def _ready_to_learn(self) -> bool:
         """Whether the window holds the three summaries a Newton step needs."""
@@ -734,9 +811,7 @@ class StateSpaceDGPT(TrackerBase):
             "cov": posterior[1],
             "expert_means": expert_means,
             "expert_covs": expert_covs,
-            "error_std": np.sqrt(
-                aggregate_error_var(self.aggregation, position_var, summary_var)
-            ),
+            "error_std": np.sqrt(aggregate_error_var(self.aggregation, position_var, summary_var)),
         }
 
     def _climb(self, log_likelihood: np.ndarray) -> None:

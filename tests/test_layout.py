@@ -118,10 +118,10 @@ def test_the_commands_are_installed(command, target):
 
 def test_every_package_folder_is_a_regular_package():
     # a folder without __init__.py imports from a source tree but is left out of the wheel
-    folders = {
-        path.parent for package in PACKAGES for path in (ROOT / package).rglob("*.py")
-    }
-    assert sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").exists()) == []
+    folders = {path.parent for package in PACKAGES for path in (ROOT / package).rglob("*.py")}
+    assert (
+        sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").exists()) == []
+    )
 
 
 def test_the_citation_names_the_version_being_cited():

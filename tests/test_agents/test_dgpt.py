@@ -365,6 +365,8 @@ def test_share_at_bound_counts_the_fits_that_end_on_a_bound():
     shares = tracker.diagnostics()
     assert fitted > 40
     assert shares["share_at_bound"] == pytest.approx(on_bound / fitted)
-    for name, count in zip(["signal_var", "space_lengthscale", "time_lengthscale", "noise_var"], per_name):
+    for name, count in zip(
+        ["signal_var", "space_lengthscale", "time_lengthscale", "noise_var"], per_name
+    ):
         assert shares[f"share_at_bound_{name}"] == pytest.approx(count / fitted)
     assert 0 < shares["share_at_bound_noise_var"] < 1  # both outcomes occur in this episode

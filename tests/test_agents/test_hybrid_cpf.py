@@ -414,13 +414,15 @@ def test_the_likelihood_of_a_heavy_scan_is_summed_in_chunks(monkeypatch, rng):
     from agents import likelihood as likelihood_module
     from agents.likelihood import PoissonLikelihood, measurement_chunks
 
-    model = PoissonLikelihood(clutter_rate=5.0, detection_rate=2.0, noise_std=3.0, sensing_area=7854.0)
+    model = PoissonLikelihood(
+        clutter_rate=5.0, detection_rate=2.0, noise_std=3.0, sensing_area=7854.0
+    )
     positions = rng.uniform(0, 100, (7, 2))
     measurements = rng.uniform(0, 100, (23, 2))
     squared = ((positions[:, None, :] - measurements[None, :, :]) ** 2).sum(axis=2)
-    dense = np.log(
-        5.0 / 7854.0 + 2.0 / (2 * np.pi * 9.0) * np.exp(-0.5 * squared / 9.0)
-    ).sum(axis=1)
+    dense = np.log(5.0 / 7854.0 + 2.0 / (2 * np.pi * 9.0) * np.exp(-0.5 * squared / 9.0)).sum(
+        axis=1
+    )
     monkeypatch.setattr(likelihood_module, "CHUNK_ELEMENTS", 7 * 4)  # 4 measurements a chunk
     assert len(measurement_chunks(7, 23)) == 6
     np.testing.assert_allclose(model.log_likelihood(positions, measurements), dense, rtol=1e-12)
@@ -442,14 +444,15 @@ def test_hybrid_is_calibrated_on_sensed_steps_at_clutter_1(tracker, scenario):
     assert median_in_band(nees, 0.7, 2.8), (np.median(nees), np.mean(nees < 0.7))
 
 
-
 def test_with_clutter_at_every_sensor_the_hybrid_falls_back_to_eq_42():
     """With clutter_sensors="all" a reporting sensor need not sense the target, so the
     per-sensor model's premise fails and the exact hybrid must use eq. (42): its estimates
     equal those of scan_model="eq42" (which would differ under the per-sensor model)."""
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0, clutter_sensors="all")
     default = run_episode(env, HybridFilter(gp="se", window=3), 1000)
-    eq42 = run_episode(env, HybridFilter(gp="se", window=3, scan_model="eq42", reacquire="none"), 1000)
+    eq42 = run_episode(
+        env, HybridFilter(gp="se", window=3, scan_model="eq42", reacquire="none"), 1000
+    )
     np.testing.assert_array_equal(default.mean, eq42.mean)
 
 
@@ -501,7 +504,9 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
             mixed = []  # mode j's mixed posterior: weights mu_i P[i, j] / c_j
             for j in range(count):
                 log_mixing = np.log(probabilities * transition[:, j] / predicted[j])
-                axes = [mixture_moments(log_mixing, mode_means[:, a], mode_covs[:, a]) for a in range(2)]
+                axes = [
+                    mixture_moments(log_mixing, mode_means[:, a], mode_covs[:, a]) for a in range(2)
+                ]
                 mixed.append((np.stack([m for m, _ in axes]), np.stack([c for _, c in axes])))
             manoeuvre, dt = dgpt.manoeuvre, info["problem_spec"].dt
             q = np.exp(dgpt.log_q_) + manoeuvre.probability * manoeuvre.intensity

@@ -49,7 +49,9 @@ def test_turn_prediction_is_the_dense_joint_prediction_per_axis(seed, dt, omega)
     q = rng.uniform(0.01, 50.0, (3, 2))
     new_mean, new_cov = turn_predict(mean, cov, dt, q, omega)
     for index in range(3):
-        expected_mean, expected_cov = dense_turn_prediction(mean[index], cov[index], dt, q[index], omega)
+        expected_mean, expected_cov = dense_turn_prediction(
+            mean[index], cov[index], dt, q[index], omega
+        )
         np.testing.assert_allclose(new_mean[index], expected_mean, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(new_cov[index], expected_cov, rtol=1e-12, atol=1e-10)
     ncv_mean, ncv_cov = ncv_predict(mean, cov, dt, q)
@@ -82,7 +84,9 @@ def dense_imm_step(modes, transition, q, manoeuvre, turn_rates, turn_q, point, n
     )
     mixed = []
     for j in range(count):
-        log_mixing = np.log([probabilities[i] * transition[i, j] / predicted[j] for i in range(count)])
+        log_mixing = np.log(
+            [probabilities[i] * transition[i, j] / predicted[j] for i in range(count)]
+        )
         mixed.append(
             [mixture_moments(log_mixing, means[:, axis], covs[:, axis]) for axis in range(2)]
         )
@@ -103,7 +107,11 @@ def dense_imm_step(modes, transition, q, manoeuvre, turn_rates, turn_q, point, n
         joint_cov = np.stack([mixed[mode][axis][1] for axis in range(2)])
         turn_mean, turn_cov = dense_turn_prediction(joint_mean, joint_cov, 1.0, [turn_q] * 2, omega)
         hypotheses.append(
-            (mode, np.log(predicted[mode]), [(turn_mean[axis], turn_cov[axis]) for axis in range(2)])
+            (
+                mode,
+                np.log(predicted[mode]),
+                [(turn_mean[axis], turn_cov[axis]) for axis in range(2)],
+            )
         )
     log_weights, posteriors = [], []
     for _, log_prior, prediction in hypotheses:

@@ -37,7 +37,8 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
         anchor_mean = mean + gain @ (anchor - H @ mean)
         anchor_cov = cov - gain @ H @ cov
         log_weight = np.log(
-            DETECTION_RATE * multivariate_normal(H @ mean, innovation_cov).pdf(anchor)
+            DETECTION_RATE
+            * multivariate_normal(H @ mean, innovation_cov).pdf(anchor)
             / CLUTTER_DENSITY
         )
         support_cov = H @ anchor_cov @ H.T + R
@@ -83,7 +84,13 @@ def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_proba
     for _ in range(5):
         mean, cov, measurements = random_problem(rng)
         got = multi_detection_update(
-            mean, cov, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY,
+            mean,
+            cov,
+            measurements,
+            H,
+            NOISE_STD,
+            DETECTION_RATE,
+            CLUTTER_DENSITY,
             miss_probability,
         )
         expected = anchored_mixture_by_loops(mean, cov, measurements, miss_probability)

@@ -217,7 +217,9 @@ def test_multi_detection_update_without_clutter_is_one_update_with_the_mean():
         # batched over two modes: each equals its own update
         means, covs = np.stack([mean, mean + 1.0]), np.stack([cov, 2.0 * cov])
         batched = multi_detection_update(means, covs, points, POSITION_MATRIX, noise_std, 1.0, 0.0)
-        alone = multi_detection_update(means[1], covs[1], points, POSITION_MATRIX, noise_std, 1.0, 0.0)
+        alone = multi_detection_update(
+            means[1], covs[1], points, POSITION_MATRIX, noise_std, 1.0, 0.0
+        )
         np.testing.assert_allclose(batched[0][1], alone[0], rtol=1e-12)
         np.testing.assert_allclose(batched[1][1], alone[1], rtol=1e-12)
 
@@ -282,11 +284,21 @@ def association_errors(points):
         PRIOR_MEAN, PRIOR_COV, points, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
     )
     multi_mean, multi_cov, _ = multi_detection_update(
-        PRIOR_MEAN, PRIOR_COV, points, POSITION_MATRIX, NOISE_STD, DETECTION_RATE,
+        PRIOR_MEAN,
+        PRIOR_COV,
+        points,
+        POSITION_MATRIX,
+        NOISE_STD,
+        DETECTION_RATE,
         CLUTTER_DENSITY,
     )
     pda_mean, _, _ = pda_update(
-        PRIOR_MEAN, PRIOR_COV, points, POSITION_MATRIX, NOISE_STD**2 * np.eye(2), 0.99,
+        PRIOR_MEAN,
+        PRIOR_COV,
+        points,
+        POSITION_MATRIX,
+        NOISE_STD**2 * np.eye(2),
+        0.99,
         CLUTTER_DENSITY,
     )
     std = np.sqrt(np.diag(exact_cov))
@@ -340,9 +352,7 @@ def test_multi_detection_update_on_random_well_separated_scans():
         while True:
             target = rng.normal(target_point, NOISE_STD, (2, 2))
             angle, radius = rng.uniform(0, 2 * np.pi, 2), rng.uniform(6.0, 20.0, 2)
-            clutter = prediction + radius[:, None] * np.column_stack(
-                [np.cos(angle), np.sin(angle)]
-            )
+            clutter = prediction + radius[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
             separation = np.linalg.norm(clutter[:, None] - target[None], axis=-1)
             if separation.min() >= 8.0 * NOISE_STD:
                 break
@@ -372,7 +382,12 @@ def test_multi_detection_log_likelihood_is_the_scan_likelihood_ratio():
             PRIOR_MEAN, PRIOR_COV, points[rows], NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
         )
         _, _, got = multi_detection_update(
-            PRIOR_MEAN, PRIOR_COV, points[rows], POSITION_MATRIX, NOISE_STD, DETECTION_RATE,
+            PRIOR_MEAN,
+            PRIOR_COV,
+            points[rows],
+            POSITION_MATRIX,
+            NOISE_STD,
+            DETECTION_RATE,
             CLUTTER_DENSITY,
         )
         assert got == pytest.approx(exact, abs=tolerance), rows
@@ -397,9 +412,7 @@ def test_imm_mix_by_hand_two_modes():
     np.testing.assert_allclose(
         mixed_cov[0], np.array([[184.0, 324.0], [324.0, 661.0]]) / 13.0, rtol=1e-13
     )
-    np.testing.assert_allclose(
-        mixed_cov[1], [[35.1875, 63.625], [63.625, 128.25]], rtol=1e-13
-    )
+    np.testing.assert_allclose(mixed_cov[1], [[35.1875, 63.625], [63.625, 128.25]], rtol=1e-13)
     # a leading batch axis (lockstep episodes) mixes each element alone
     batched = imm_mix(
         np.stack([means, means[::-1]]),
@@ -528,6 +541,7 @@ def test_the_clairvoyant_floor_is_below_every_registered_tracker(scenario):
     ``dgpt-*`` and ``gp``) is held to the detected-step floor only: over the episode it beats
     the floor on S4 (5.99 against 6.51 m on these seeds). The same tracker without the
     silence is held to both."""
+
     def run(tracker_id, **options):
         envs = [gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=1.0) for _ in FLOOR_SEEDS]
         kwargs = {**tuned_kwargs(tracker_id, scenario), **options}

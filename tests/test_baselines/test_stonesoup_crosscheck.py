@@ -254,7 +254,9 @@ def test_batched_pda_update_equals_stonesoup_per_element():
 
 # -- the wrapper (baselines/stonesoup.py) -------------------------------------------------------
 
-SPEC = problem_spec([[100.0, 200.0], [150.0, 220.0], [400.0, 400.0]], noise_std=2.0, dt=2.0, n_steps=7)
+SPEC = problem_spec(
+    [[100.0, 200.0], [150.0, 220.0], [400.0, 400.0]], noise_std=2.0, dt=2.0, n_steps=7
+)
 K = 6
 SCANS = [
     [],

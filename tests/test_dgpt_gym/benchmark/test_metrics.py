@@ -171,8 +171,15 @@ def test_episode_metrics_split_detected_and_gap_steps():
 
 def test_summarize_runs_intervals_and_floor_ratios():
     rows = [
-        {"seed": s, "nrmse_x": x, "nrmse_y": 0.01, "rmse_x": 1.0, "rmse_y": 1.0,
-         "rmse_2d": r, "track_lost": lost}
+        {
+            "seed": s,
+            "nrmse_x": x,
+            "nrmse_y": 0.01,
+            "rmse_x": 1.0,
+            "rmse_y": 1.0,
+            "rmse_2d": r,
+            "track_lost": lost,
+        }
         for s, x, r, lost in ((0, 0.01, 2.0, 0.0), (1, 0.02, 4.0, 1.0), (2, 0.03, 9.0, 0.0))
     ]
     summary = summarize_runs(rows)
@@ -187,8 +194,13 @@ def test_summarize_runs_intervals_and_floor_ratios():
     # one run has no spread to estimate: the interval is NaN
     assert np.isnan(summarize_runs(rows[:1])["nrmse_x_ci95"])
     cells = [
-        {"tracker": "clairvoyant", "scenario": "S1", "noise_std": 1.0, "clutter_rate": 1.0,
-         "rmse_2d": 2.0},
+        {
+            "tracker": "clairvoyant",
+            "scenario": "S1",
+            "noise_std": 1.0,
+            "clutter_rate": 1.0,
+            "rmse_2d": 2.0,
+        },
         {"tracker": "pda", "scenario": "S1", "noise_std": 1.0, "clutter_rate": 1.0, "rmse_2d": 5.0},
         {"tracker": "pda", "scenario": "S2", "noise_std": 1.0, "clutter_rate": 1.0, "rmse_2d": 5.0},
     ]

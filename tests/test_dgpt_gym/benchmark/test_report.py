@@ -80,9 +80,7 @@ def test_tuned_windows_lookup():
     assert windows.tuned_kwargs("dgpt-rbcm-trend", "S2") == {
         "window": tuned["dgpt-rbcm-trend"]["S2"]
     }
-    assert windows.tuned_kwargs("hybrid-trend", "S2") == {
-        "window": tuned["dgpt-rbcm-trend"]["S2"]
-    }
+    assert windows.tuned_kwargs("hybrid-trend", "S2") == {"window": tuned["dgpt-rbcm-trend"]["S2"]}
     # the state-space trackers' window learns q and is not tuned per scenario
     for tracker in ("centroid", "dgpt-rbcm", "gp", "hybrid"):
         assert windows.tuned_kwargs(tracker, "S2") == {}
@@ -102,7 +100,10 @@ def test_tune_windows_picks_the_best_of_its_grid(tmp_path):
     direct = []
     for trajectory in ("fixed", "random"):  # windows are chosen on both path modes
         env_kwargs = {
-            "scenario": "S3", "noise_std": 1.0, "clutter_rate": 1.0, "trajectory": trajectory
+            "scenario": "S3",
+            "noise_std": 1.0,
+            "clutter_rate": 1.0,
+            "trajectory": trajectory,
         }
         unit = RunUnit(
             "dgpt-rbcm-trend",
@@ -192,10 +193,20 @@ def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
     from dgpt_gym.benchmark.outputs import bounds_markdown
 
     rows = [
-        {"tracker": "dgpt-rbcm", "scenario": "S1", "share_at_bound": 0.5,
-         "share_at_bound_signal_var": 0.25, "share_at_bound_noise_var": 0.5},
-        {"tracker": "dgpt-rbcm", "scenario": "S1", "share_at_bound": 1.0,
-         "share_at_bound_signal_var": 0.75, "share_at_bound_noise_var": 0.0},
+        {
+            "tracker": "dgpt-rbcm",
+            "scenario": "S1",
+            "share_at_bound": 0.5,
+            "share_at_bound_signal_var": 0.25,
+            "share_at_bound_noise_var": 0.5,
+        },
+        {
+            "tracker": "dgpt-rbcm",
+            "scenario": "S1",
+            "share_at_bound": 1.0,
+            "share_at_bound_signal_var": 0.75,
+            "share_at_bound_noise_var": 0.0,
+        },
         {"tracker": "imm-pda", "scenario": "S1"},
     ]
     lines = bounds_markdown(rows)
@@ -207,5 +218,10 @@ def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
     # the first row lacks the GP keys: the columns are the union, not the first row's keys
     path = report.write_rows_csv([rows[2], *rows[:2]], tmp_path / "rows.csv")
     header = path.read_text().splitlines()[0].split(",")
-    assert header == ["tracker", "scenario", "share_at_bound", "share_at_bound_signal_var",
-                      "share_at_bound_noise_var"]
+    assert header == [
+        "tracker",
+        "scenario",
+        "share_at_bound",
+        "share_at_bound_signal_var",
+        "share_at_bound_noise_var",
+    ]
