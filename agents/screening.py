@@ -47,6 +47,7 @@ __all__ = [
     "MAX_TARGET_SPEED",
     "scan_likelihood_ratio",
     "scan_log_likelihood_ratios",
+    "area_log_likelihood_ratios",
     "joint_sensing_probability",
     "scan_posterior",
     "sensing_probability",
@@ -127,15 +128,10 @@ def scan_log_likelihood_ratios(
         near = position_tree.sparse_distance_matrix(
             spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
         )
-        near_position = near["i"].astype(np.int64)
-        near_sensor = sensors[near["j"].astype(np.int64)]
-        # a point counts for a position only if its sensor covers the position (and is awake)
-        offset = positions[near_position] - sensor_positions[near_sensor]
-        counted = np.sum(offset**2, axis=1) <= sensing_range**2
-        if awake is not None:
-            counted &= np.asarray(awake, dtype=bool)[near_sensor]
-        near_key = (near_position * n_sensors + near_sensor)[counted]
-        densities = np.exp(-0.5 * near["v"][counted] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
+        # keyed by (position, sensor); the keys of sensors that do not cover the position
+        # (or sleep) are never looked up below
+        near_key = near["i"].astype(np.int64) * n_sensors + sensors[near["j"].astype(np.int64)]
+        densities = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
         if near_key.size:
             order = np.argsort(near_key, kind="stable")
             near_key, densities = near_key[order], densities[order]
@@ -151,6 +147,31 @@ def scan_log_likelihood_ratios(
     with np.errstate(divide="ignore"):
         log_ratio = np.bincount(pair_position, weights=np.log(pair_ratio), minlength=n)
     return log_ratio, pair_position, pair_sensor
+
+
+def area_log_likelihood_ratios(
+    positions: np.ndarray,
+    points: np.ndarray,
+    sensors: np.ndarray,
+    spec: ProblemSpec,
+    noise_var: float,
+    awake: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`scan_log_likelihood_ratios` (N,) with the sensors, range and rates of
+    ``spec``, and -inf at the positions outside its area (the target is inside it)."""
+    log_ratio, _, _ = scan_log_likelihood_ratios(
+        positions,
+        points,
+        sensors,
+        np.asarray(spec.sensor_positions),
+        spec.sensing_range,
+        noise_var,
+        spec.detection_rate,
+        spec.clutter_density,
+        awake,
+    )
+    inside = np.all((positions >= 0.0) & (positions <= spec.area), axis=1)
+    return np.where(inside, log_ratio, -np.inf)
 
 
 def joint_sensing_probability(
@@ -222,19 +243,9 @@ def scan_posterior(
             / m
             * np.bincount(near["i"].astype(np.int64), weights=density, minlength=n)
         )
-    log_ratio, _, _ = scan_log_likelihood_ratios(
-        positions,
-        points,
-        sensors,
-        spec.sensor_positions,
-        spec.sensing_range,
-        noise_var,
-        spec.detection_rate,
-        spec.clutter_density,
-        awake,
-    )
-    inside = np.all((positions >= 0.0) & (positions <= area), axis=1)
-    log_weight = np.where(inside, log_ratio - np.log(proposal), -np.inf)
+    log_weight = area_log_likelihood_ratios(
+        positions, points, sensors, spec, noise_var, awake
+    ) - np.log(proposal)
     if not np.any(np.isfinite(log_weight)):
         return None
     weights = np.exp(log_weight - np.max(log_weight))

@@ -94,7 +94,7 @@ import numpy as np
 from agents import aggregation as agg
 from agents.gating import gate_measurements, target_probabilities
 from agents.particles import kernel_scale, resample_systematic
-from agents.screening import ClutterScreen, scan_log_likelihood_ratios, scan_posterior
+from agents.screening import ClutterScreen, area_log_likelihood_ratios, scan_posterior
 from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
 from agents.state_space import (
     Manoeuvre,
@@ -601,10 +601,11 @@ class StateSpaceDGPT(TrackerBase):
         effective number falls below half. With clutter at every sensor, ``scan`` = (points,
         sensors) holds every report of a step on which the screen admitted no sensor, and
         the weights are the scans' likelihood ratio instead (:meth:`_scan_likelihood`),
-        which is that indicator when nothing is reported. The estimate is the moments of their kernel
-        density: Gaussian kernels of covariance :func:`agents.particles.kernel_scale` times
-        the predicted particles' covariance (Silverman's bandwidth), so that a few surviving
-        particles do not report a variance near zero. The resampled particles are not
+        which is that indicator when nothing is reported. The estimate is the moments of
+        their kernel density: Gaussian kernels of covariance
+        :func:`agents.particles.kernel_scale` times the predicted particles' covariance
+        (Silverman's bandwidth), so that a few surviving particles do not report a variance
+        near zero. The resampled particles are not
         jittered with those kernels: on training seeds 1000-1011 that drifted tracks (RMSE
         on the reference paths 2.15 m above dgpt-bcm's, against 1.10 m below without
         the jitter). If every particle lies in a disc (the model cannot explain the
@@ -705,22 +706,11 @@ class StateSpaceDGPT(TrackerBase):
     def _scan_likelihood(self, positions, points, sensors, awake) -> np.ndarray:
         """The likelihood ratio of a step's scans (every report, clutter at every sensor)
         at ``positions`` (N, 2), scaled to a largest value of 1, and 0 outside the area
-        (:func:`agents.screening.scan_log_likelihood_ratios`; all zero if the scans rule
+        (:func:`agents.screening.area_log_likelihood_ratios`; all zero if the scans rule
         out every position)."""
-        spec = self.spec_
-        log_ratio, _, _ = scan_log_likelihood_ratios(
-            positions,
-            points,
-            sensors,
-            np.asarray(spec.sensor_positions),
-            spec.sensing_range,
-            self.noise_var_,
-            spec.detection_rate,
-            spec.clutter_density,
-            awake,
+        log_ratio = area_log_likelihood_ratios(
+            positions, points, sensors, self.spec_, self.noise_var_, awake
         )
-        inside = np.all((positions >= 0.0) & (positions <= spec.area), axis=1)
-        log_ratio = np.where(inside, log_ratio, -np.inf)
         if not np.any(np.isfinite(log_ratio)):
             return np.zeros(positions.shape[0])
         return np.exp(log_ratio - np.max(log_ratio))
