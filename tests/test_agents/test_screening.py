@@ -248,6 +248,24 @@ def test_a_point_at_the_prediction_that_the_other_covering_sensor_contradicts_is
     assert alone[0] > 0.99
 
 
+def sampled_and_grid_means(points, sensors, spec, n, seed, spacing):
+    """The mean of :func:`scan_posterior` with ``n`` draws, its importance-sampling standard
+    error sqrt(var / ESS) per axis and ESS, and the posterior mean on a grid of ``spacing``
+    over the whole area, with the grid's weights and points."""
+    positions, weights = scan_posterior(points, sensors, spec, 1.0, n, np.random.default_rng(seed))
+    mean = weights @ positions
+    ess = 1.0 / np.sum(weights**2)
+    standard_error = np.sqrt(weights @ (positions - mean) ** 2 / ess)
+    axis = np.arange(spacing / 2.0, spec.area, spacing)
+    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
+    log_ratio, _, _ = scan_log_likelihood_ratios(
+        grid, points, sensors, spec.sensor_positions, 50.0, 1.0, 1.0, spec.clutter_density
+    )
+    grid_weights = np.exp(log_ratio - log_ratio.max())
+    grid_mean = grid_weights @ grid / grid_weights.sum()
+    return mean, standard_error, ess, grid_mean, grid_weights, grid
+
+
 def test_scan_posterior_mean_matches_a_dense_grid():
     """The importance-sampled posterior mean from one scan with a uniform prior, against
     the same posterior on a 0.2 m grid over the whole 100 m area, which four sensors cover
@@ -256,23 +274,15 @@ def test_scan_posterior_mean_matches_a_dense_grid():
     errors, sqrt(var / ESS) per axis; the mean is also within 1 m of the target."""
     sensors_at = np.array([[25.0, 25.0], [75.0, 25.0], [25.0, 75.0], [75.0, 75.0]])
     spec = problem_spec(sensors_at, clutter_sensors="all", area=100.0)
-    rng = np.random.default_rng(1)
     target = np.array([50.0, 52.0])
-    points = np.vstack([target + rng.normal(0.0, 1.0, (4, 2)), sensors_at + [20.0, -10.0]])
+    noise = np.random.default_rng(1).normal(0.0, 1.0, (4, 2))
+    points = np.vstack([target + noise, sensors_at + [20.0, -10.0]])
     sensors = np.tile(np.arange(4), 2)
-    positions, weights = scan_posterior(points, sensors, spec, 1.0, 20000, rng)
-    mean = weights @ positions
-    var = weights @ (positions - mean) ** 2
-    ess = 1.0 / np.sum(weights**2)
-    axis = np.arange(0.1, 100.0, 0.2)
-    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
-    log_ratio, _, _ = scan_log_likelihood_ratios(
-        grid, points, sensors, sensors_at, 50.0, 1.0, 1.0, spec.clutter_density
+    mean, standard_error, ess, grid_mean, _, _ = sampled_and_grid_means(
+        points, sensors, spec, 20000, 1, 0.2
     )
-    grid_weights = np.exp(log_ratio - log_ratio.max())
-    grid_mean = grid_weights @ grid / grid_weights.sum()
     assert ess > 100
-    assert np.all(np.abs(mean - grid_mean) <= 4.0 * np.sqrt(var / ess))
+    assert np.all(np.abs(mean - grid_mean) <= 4.0 * standard_error)
     assert np.linalg.norm(mean - target) < 1.0
 
 
@@ -282,24 +292,13 @@ def test_scan_posterior_weighs_an_uncovered_region_against_a_point():
     no sensor covers, so the mean lies between the point and the uncovered region's centre
     (87 % of the mass there). Against a 0.25 m grid over the area; tolerance 4 importance-
     sampling standard errors."""
-    sensors_at = np.array([[50.0, 50.0]])
-    spec = problem_spec(sensors_at, clutter_sensors="all", area=200.0)
-    points, sensors = np.array([[50.0, 60.0]]), np.array([0])
-    rng = np.random.default_rng(2)
-    positions, weights = scan_posterior(points, sensors, spec, 1.0, 40000, rng)
-    mean = weights @ positions
-    var = weights @ (positions - mean) ** 2
-    ess = 1.0 / np.sum(weights**2)
-    axis = np.arange(0.125, 200.0, 0.25)
-    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
-    log_ratio, _, _ = scan_log_likelihood_ratios(
-        grid, points, sensors, sensors_at, 50.0, 1.0, 1.0, spec.clutter_density
+    spec = problem_spec([[50.0, 50.0]], clutter_sensors="all", area=200.0)
+    mean, standard_error, _, grid_mean, grid_weights, grid = sampled_and_grid_means(
+        np.array([[50.0, 60.0]]), np.array([0]), spec, 40000, 2, 0.25
     )
-    grid_weights = np.exp(log_ratio)
-    grid_mean = grid_weights @ grid / grid_weights.sum()
-    uncovered = np.hypot(*(grid - sensors_at[0]).T) > 50.0
+    uncovered = np.hypot(*(grid - 50.0).T) > 50.0
     assert grid_weights[uncovered].sum() / grid_weights.sum() == pytest.approx(0.875, abs=0.01)
-    assert np.all(np.abs(mean - grid_mean) <= 4.0 * np.sqrt(var / ess))
+    assert np.all(np.abs(mean - grid_mean) <= 4.0 * standard_error)
 
 
 def test_initiation_scores_need_every_covering_sensor_to_agree():
