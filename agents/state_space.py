@@ -44,6 +44,7 @@ __all__ = [
     "expert_weights",
     "fused_update",
     "aggregate_error_var",
+    "aggregate_error_cov",
     "step_log_likelihood",
     "PooledSummaries",
     "pool_summaries",
@@ -267,6 +268,37 @@ def aggregate_error_var(method, prior_var, noise_var):
     k = scaled_prior / (scaled_prior + 1.0 / total_gain)
     pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
     return (1.0 - k) ** 2 * prior_var + k**2 * pseudo_noise_var
+
+
+def aggregate_error_cov(method, prior_cov, error_prior_cov, noise_var):
+    """The covariance (..., 2, 2) of the aggregated state's error when the prior mean's
+    error has covariance ``error_prior_cov`` (..., 2, 2), which need not be the prior
+    covariance ``prior_cov`` the aggregation uses (..., 2, 2), and each summary is the
+    target's position plus independent noise of variance ``noise_var`` (..., M).
+
+    :func:`fused_update` is a Kalman update of N(mu_0, P_0 / a) with the pseudo-summary
+    z* = sum g_i z_i / G of noise variance sum g_i^2 s_i / G^2 (:func:`aggregate_error_var`),
+    with gain K = (P_0 / a) e1 / ((P_0 / a)_11 + 1 / G). Its error is
+    (I - K e1^T)(mu_0 - x) - K v*, whose covariance is the Joseph form
+
+        (I - K e1^T) E_0 (I - K e1^T)^T + K K^T sum g_i^2 s_i / G^2
+
+    with E_0 = ``error_prior_cov``. With E_0 = P_0 its position entry is
+    :func:`aggregate_error_var`, and for BCM the whole matrix is the posterior covariance.
+    PoE and GPoE broadcast a posterior narrower than their error, so carried from step to
+    step their E_0 is wider than their P_0 (:class:`agents.state_space_dgpt.StateSpaceDGPT`)."""
+    prior_cov = np.asarray(prior_cov, dtype=float)
+    error_prior_cov = np.asarray(error_prior_cov, dtype=float)
+    noise_var = np.asarray(noise_var, dtype=float)
+    gain, a = _fusion_weights(method, prior_cov[..., 0, 0], noise_var)
+    total_gain = gain.sum(axis=-1)
+    scaled_first_column = prior_cov[..., :, 0] / a[..., None]
+    kalman_gain = scaled_first_column / (scaled_first_column[..., :1] + 1.0 / total_gain[..., None])
+    pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
+    keep = np.eye(2) - kalman_gain[..., :, None] * np.array([1.0, 0.0])
+    return keep @ error_prior_cov @ np.swapaxes(keep, -1, -2) + pseudo_noise_var[
+        ..., None, None
+    ] * (kalman_gain[..., :, None] * kalman_gain[..., None, :])
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ from agents.state_space import (
     Manoeuvre,
     PooledSummaries,
     WindowStep,
+    aggregate_error_cov,
     aggregate_error_var,
     condition_on_position,
     expert_posteriors,
@@ -112,12 +113,12 @@ def test_fused_update_is_the_aggregation_of_the_experts_local_posteriors(method,
         np.testing.assert_allclose(c, one_cov, rtol=1e-9, atol=1e-9)
 
 
-def dense_error_var(method, prior_cov, noise_var):
+def dense_error_var(method, prior_cov, noise_var, error_prior_var=None):
     """The variance of the dense aggregate's position error, from its linear map: the
     aggregated position is c . mu_0 + sum_i c_i z_i (coefficients read off
     :func:`dense_aggregate` with unit inputs), unbiased (c = (1 - sum_i c_i) e1); with
     x ~ N(mu_0, P0) and z_i = x_p + v_i its error is (1 - sum_i c_i) (x_p - mu_0p) -
-    sum_i c_i v_i."""
+    sum_i c_i v_i. ``error_prior_var``: the variance of x_p - mu_0p when it is not P0's."""
     n = len(noise_var)
 
     def position(prior_mean, summaries):
@@ -128,7 +129,9 @@ def dense_error_var(method, prior_cov, noise_var):
     c = np.array([position(np.eye(2)[k], np.zeros(n)) for k in range(2)])
     c_i = np.array([position(np.zeros(2), np.eye(n)[i]) for i in range(n)])
     np.testing.assert_allclose(c, [1.0 - c_i.sum(), 0.0], atol=1e-9)
-    return (1.0 - c_i.sum()) ** 2 * prior_cov[0, 0] + np.sum(c_i**2 * np.asarray(noise_var))
+    if error_prior_var is None:  # the prior mean's position error, by default the prior's
+        error_prior_var = prior_cov[0, 0]
+    return (1.0 - c_i.sum()) ** 2 * error_prior_var + np.sum(c_i**2 * np.asarray(noise_var))
 
 
 @pytest.mark.parametrize("method", ["poe", "gpoe", "bcm", "rbcm"])
@@ -146,6 +149,39 @@ def test_aggregate_error_var_is_the_dense_aggregates_error_variance(method, seed
     if method == "bcm" or n_experts == 1:
         np.testing.assert_allclose(got, exact_var, rtol=1e-9)
     assert got >= exact_var * (1 - 1e-9)
+
+
+@pytest.mark.parametrize("method", ["poe", "gpoe", "bcm", "rbcm"])
+@given(seed=seeds, n_experts=st.integers(1, 5))
+@settings(max_examples=25, deadline=None)
+def test_aggregate_error_cov_is_the_dense_aggregates_error_covariance(method, seed, n_experts):
+    """The dense aggregate's state is C mu_0 + sum_i c_i z_i (C (2, 2), c_i (2,) read off
+    :func:`dense_aggregate` with unit inputs); with the prior mean's error of covariance E
+    (random, not the prior covariance P0 the aggregation uses) and z_i = x_p + v_i, its
+    error covariance is C E C^T + sum_i c_i c_i^T s_i. With E = P0 the position entry is
+    :func:`aggregate_error_var`, and for BCM the whole matrix is its posterior covariance."""
+    rng = np.random.default_rng(seed)
+    _, prior_cov = random_state(rng)
+    _, error_cov = random_state(rng)
+    noise_var = rng.uniform(0.5, 20.0, n_experts)
+
+    def state(prior_mean, summaries):
+        return dense_aggregate(method, prior_mean, prior_cov, summaries, noise_var)[0]
+
+    columns = np.column_stack([state(np.eye(2)[k], np.zeros(n_experts)) for k in range(2)])
+    c_i = [state(np.zeros(2), np.eye(n_experts)[i]) for i in range(n_experts)]
+    expected = columns @ error_cov @ columns.T + sum(
+        np.outer(c, c) * r for c, r in zip(c_i, noise_var)
+    )
+    got = aggregate_error_cov(method, prior_cov, error_cov, noise_var)
+    np.testing.assert_allclose(got, expected, rtol=1e-8, atol=1e-9)
+    own = aggregate_error_cov(method, prior_cov, prior_cov, noise_var)
+    np.testing.assert_allclose(own[0, 0], aggregate_error_var(method, prior_cov[0, 0], noise_var))
+    if method == "bcm":
+        posterior_cov = fused_update("bcm", np.zeros(2), prior_cov, np.zeros(n_experts), noise_var)[
+            1
+        ]
+        np.testing.assert_allclose(own, posterior_cov, rtol=1e-9, atol=1e-9)
 
 
 def test_rbcm_error_variance_is_what_states_drawn_from_the_model_give():
@@ -364,7 +400,9 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
     joint Gaussian likelihood (scipy) and the dense aggregate; the estimate is the mixture
     weighted by prior probability times likelihood (moments component by component), the UCB
     is the larger over the components of Lemma 1 on the component's error (its share of delta
-    scaled by its weight) plus its distance to the estimate, and the next-step
+    scaled by its weight; the prior's error has the prediction's covariance plus the excess
+    the tracker carried, the transition times it times the transition's transpose) plus its
+    distance to the estimate, and the next-step
     prediction carries q + p q_m with the q just learnt. Without data the components keep
     their prior weights. The summaries' weights are eq. (27)'s or, with the joint
     association, the target probabilities at the component's prediction."""
@@ -383,6 +421,7 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
         truth = np.array([5.0 + 2.0 * t, 3.0 - t])
         tracker.update(measurement_obs(t, truth + rng.normal(0.0, 1.0, (3, 2)), [0, 1, 2]))
     before = (tracker.mean_.copy(), tracker.cov_.copy(), np.exp(tracker.log_q_))
+    excess = tracker.error_excess_.copy()  # RBCM's error covariance minus its posterior's
     # a manoeuvre (the target is 4 m off the constant-velocity path) and a clutter point
     points = np.vstack([[25.0, -9.0] + rng.normal(0.0, 1.0, (3, 2)), [[18.0, -2.0]]])
     estimate = tracker.update(measurement_obs(8, points, [0, 1, 2, 1]))
@@ -448,7 +487,11 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
             m, c = dense_aggregate("rbcm", *prediction[axis], z, r)
             axis_means.append(m)
             axis_covs.append(c)
-            axis_bounds.append(np.sqrt(dense_error_var("rbcm", prediction[axis][1], r)))
+            # the prior's error: the prediction's covariance plus the excess carried by F
+            carried = (transition[:2, :2] @ excess[axis] @ transition[:2, :2].T)[0, 0]
+            axis_bounds.append(
+                np.sqrt(dense_error_var("rbcm", prediction[axis][1], r, p + carried))
+            )
         log_weights.append(log_weight)
         means.append(axis_means)
         covs.append(axis_covs)
@@ -478,6 +521,7 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
     assert 0.05 < manoeuvre_weight < 0.95, manoeuvre_weight  # both components matter
     # a step without data: the prediction's mixture under the prior weights
     mean1, cov1, q1 = tracker.mean_.copy(), tracker.cov_.copy(), np.exp(tracker.log_q_)
+    excess1 = tracker.error_excess_.copy()
     estimate = tracker.update(measurement_obs(9, np.empty((0, 2)), []))
     for axis in range(2):
         predictions = []
@@ -492,12 +536,15 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
         )
         np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-9)
         np.testing.assert_allclose(estimate.mean[axis], mean[0], rtol=1e-12)
-        # prior weights 0.8 and 0.2, equal means: the larger of the components' bounds
+        # prior weights 0.8 and 0.2, equal means: the larger of the components' bounds, on
+        # the prediction's variance plus the carried excess of RBCM's error
+        carried = (transition[:2, :2] @ excess1[axis] @ transition[:2, :2].T)[0, 0]
         expected_ucb = max(
-            np.sqrt(2 * np.log(2 * w / 0.01) * c[0, 0])
+            np.sqrt(2 * np.log(2 * w / 0.01) * (c[0, 0] + carried))
             for w, (_, c) in zip((0.8, 0.2), predictions)
         )
         np.testing.assert_allclose(estimate.ucb[axis], expected_ucb, rtol=1e-12)
+        np.testing.assert_allclose(estimate.var[axis], cov[0, 0] + carried, rtol=1e-12)
 
 
 def test_an_experts_local_posterior_uses_only_its_own_data_and_the_broadcast_prior():
@@ -775,15 +822,18 @@ def test_the_centralized_gp_is_the_bcm_aggregate_exactly():
         dgpt_gym.make_tracker("gp", aggregation="rbcm")
 
 
-@pytest.mark.parametrize("aggregation", ["rbcm", "bcm"])
+@pytest.mark.parametrize("aggregation", ["rbcm", "bcm", "gpoe", "poe"])
 def test_the_reported_variance_is_the_estimates_error_variance_in_the_model(aggregation):
     """Targets drawn from the tracker's own NCV model (q = 2, no manoeuvres, no turns, q
     not learnt), four sensors each reporting the target with sigma_n = 1 and no clutter: the
     2-D NEES of the estimate at the 12th step is chi-square with 2 degrees of freedom, mean 2
     and standard deviation 2, so the mean over 400 independent episodes lies within
-    5 x 2 / sqrt(400) = 0.5 of 2. RBCM's own posterior variance is not its error's (mean
-    NEES 1.36 here: too wide); the error variance under the model
-    (:func:`agents.state_space.aggregate_error_var`) is what the tracker reports."""
+    5 x 2 / sqrt(400) = 0.5 of 2. RBCM's, GPoE's and PoE's own posterior variances are not
+    their errors' (mean NEES 1.36, 2.9 and 8.5 here); the tracker reports the error's
+    variance under the model, carrying the excess of the error's covariance over the
+    broadcast posterior from step to step (:func:`agents.state_space.aggregate_error_cov`;
+    measured 1.96, 1.96, 1.98 and 1.99 for RBCM, BCM, GPoE and PoE; without the carried
+    excess GPoE and PoE gave 2.6 and 3.7)."""
     q, n_sensors, n_episodes, n_steps = 2.0, 4, 400, 12
     transition = np.array([[1.0, 1.0], [0.0, 1.0]])
     process_cov = q * np.array([[1.0 / 3.0, 1.0 / 2.0], [1.0 / 2.0, 1.0]])  # dt = 1
