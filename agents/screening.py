@@ -46,6 +46,7 @@ __all__ = [
     "ClutterScreen",
     "MAX_TARGET_SPEED",
     "scan_likelihood_ratio",
+    "scan_log_likelihood_ratio",
     "scan_log_likelihood_ratios",
     "area_log_likelihood_ratios",
     "joint_sensing_probability",
@@ -123,7 +124,7 @@ def scan_log_likelihood_ratios(
     if not pair_position.size:
         return np.zeros(n), pair_position, pair_sensor
     n_sensors = sensor_positions.shape[0]
-    pair_ratio = np.zeros(pair_position.size)
+    pair_log_ratio = np.full(pair_position.size, -np.inf)  # no point near: ruled out
     if points.shape[0]:  # points beyond 6 sigma have densities below 2e-8 of the peak
         near = position_tree.sparse_distance_matrix(
             spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
@@ -137,16 +138,18 @@ def scan_log_likelihood_ratios(
             near_key, densities = near_key[order], densities[order]
             first = np.r_[True, near_key[1:] != near_key[:-1]]
             keys = near_key[first]
-            ratio = scan_likelihood_ratio(
+            log_ratio = scan_log_likelihood_ratio(
                 densities, np.cumsum(first) - 1, keys.size, detection_rate, clutter_density
             )
             pair_key = pair_position * n_sensors + pair_sensor
             at = np.minimum(np.searchsorted(keys, pair_key), keys.size - 1)
             match = keys[at] == pair_key
-            pair_ratio[match] = ratio[at[match]]
-    with np.errstate(divide="ignore"):
-        log_ratio = np.bincount(pair_position, weights=np.log(pair_ratio), minlength=n)
-    return log_ratio, pair_position, pair_sensor
+            pair_log_ratio[match] = log_ratio[at[match]]
+    return (
+        np.bincount(pair_position, weights=pair_log_ratio, minlength=n),
+        pair_position,
+        pair_sensor,
+    )
 
 
 def area_log_likelihood_ratios(
@@ -225,6 +228,8 @@ def scan_posterior(
     the scans' likelihood ratio (:func:`scan_log_likelihood_ratios`) over the proposal
     density. Returns ``(positions (n, 2), weights (n,) summing to one)``, or None when the
     scans rule out every drawn position."""
+    if n < 3:
+        raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
     area, m = spec.area, points.shape[0]
     n_uniform = n if m == 0 else n // 3
     positions = rng.random((n, 2)) * area
@@ -250,6 +255,28 @@ def scan_posterior(
         return None
     weights = np.exp(log_weight - np.max(log_weight))
     return positions, weights / weights.sum()
+
+
+def scan_log_likelihood_ratio(
+    densities: np.ndarray,
+    groups: np.ndarray,
+    n_groups: int,
+    detection_rate: float,
+    clutter_density: float,
+) -> np.ndarray:
+    """log of :func:`scan_likelihood_ratio`, computed in log space so that scans with many
+    points near x do not overflow: log LR = -lambda_T + l + log(1 - e^(-l)) - log(1 -
+    e^(-lambda_T)) with l = sum_j log(1 + lambda_T N_j / c); -inf for scans without a
+    point (l = 0)."""
+    log_product = np.zeros(n_groups)
+    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
+    with np.errstate(divide="ignore"):
+        return (
+            -detection_rate
+            + log_product
+            + np.log(-np.expm1(-log_product))
+            - np.log(-np.expm1(-detection_rate))
+        )
 
 
 def disc_probability(
@@ -386,10 +413,12 @@ class ClutterScreen:
     With ``particles`` = N > 0 (the state-space trackers' default) the sensing probabilities
     are those of all scans together (:func:`joint_sensing_probability`, N positions drawn
     from the prediction with ``rng``), and a track whose every drawn position the scans rule
-    out is lost at once. Per sensor (N = 0, DGPT's), a clutter point near the prediction
-    admits its sensor even when the other sensors covering it report nothing there: on
-    S1-S4 at clutter rate 1 (training seeds 1000-1015, both path modes) the joint form took
-    the state-space DGPT-RBCM's RMSE from 73.5 to 56.5 m (docs/analysis.md).
+    out is lost at once. Per sensor (N = 0, the class default and DGPT's), a clutter point
+    near the prediction admits its sensor even when the other sensors covering it report
+    nothing there: on S1-S4 at clutter rate 1 (training seeds 1000-1015, both path modes)
+    the joint screen, with the scan posterior as the estimate before a track
+    (:func:`scan_posterior`), took the state-space DGPT-RBCM's RMSE from 73.5 to 56.5 m
+    (docs/analysis.md, "0.13.0").
 
     Uses the rates and noise of the spec (as the hybrid filter does): the paper's DGPT has
     no model of sensors that report clutter only.

@@ -497,14 +497,15 @@ class StateSpaceDGPT(TrackerBase):
         of their own that is not their error's (0.11.0 reported it: RBCM's median NEES was
         0.66-0.68 on S1 at sigma_z = 2 and 4); BCM's posterior variance is its error's, and
         BCM reports it (var is None). Their prior's error is not the broadcast prior's
-        either: since 0.13.0 the tracker carries the excess of the error's covariance over
-        the broadcast posterior (``error_excess_``, the hypotheses' mixture of
-        ``error_cov - cov``) through the NCV transition to the next step's prior. With
-        targets drawn from the model the mean NEES is then 1.96-1.99 for every aggregation
-        (tests/test_agents/test_state_space.py); taking the broadcast prior as exact (0.12.0)
-        gave GPoE 2.6 and PoE 3.7, their own variances 2.9 and 8.5. After a coverage gap
-        the excess restarts at 0: the gap's particles are drawn from the broadcast
-        posterior."""
+        either: since 0.13.0 the tracker without turn modes carries the excess of the
+        error's covariance over the broadcast posterior (``error_excess_``, the hypotheses'
+        mixture of ``error_cov - cov``) through the NCV transition to the next step's prior
+        (:meth:`_carries_error_excess`; not with turn modes, so not in the registered
+        trackers). With targets drawn from the model the mean NEES is then 1.96-1.99 for
+        every aggregation (tests/test_agents/test_state_space.py); taking the broadcast
+        prior as exact (0.12.0) gave GPoE 2.6 and PoE 3.7, their own variances 2.9 and 8.5.
+        After a coverage gap the excess restarts at 0: the gap's particles are drawn from
+        the broadcast posterior."""
         if getattr(self, "spec_", None) is None:
             raise RuntimeError("call reset(spec) before update(obs)")
         spec = self.spec_
@@ -558,8 +559,12 @@ class StateSpaceDGPT(TrackerBase):
             var = None
             if self.error_excess_ is not None:  # the error's excess over the prediction
                 self.error_excess_ = _carry(self.error_excess_, dt)
-                prior_var = prior_var + self.error_excess_[:, None, 0, 0]
-                var = cov[:, 0, 0] + self.error_excess_[:, 0, 0]
+                carried_var = prior_var + self.error_excess_[:, None, 0, 0]
+                if np.all(carried_var > 0):
+                    prior_var = carried_var
+                    var = cov[:, 0, 0] + self.error_excess_[:, 0, 0]
+                else:  # not a covariance with this prediction: drop the excess
+                    self.error_excess_ = None
             ucb = agg.mixture_half_width(
                 np.exp(log_weights),
                 np.stack([prior_mean[:, 0] - mean[:, 0] for (prior_mean, _), _ in predictions]),
@@ -606,6 +611,7 @@ class StateSpaceDGPT(TrackerBase):
         error_var = None
         if self.aggregation != "bcm":  # BCM's posterior variance is its error variance
             error_var = weights @ (hypotheses["error_std"] ** 2 + offsets**2)
+        if self._carries_error_excess():
             self.error_excess_ = np.einsum(
                 "h,haij->aij", weights, hypotheses["error_cov"] - hypotheses["cov"]
             )
@@ -738,8 +744,9 @@ class StateSpaceDGPT(TrackerBase):
         """A step without a track, with clutter at every sensor, on which no track starts:
         the moments of the position's posterior given this step's scans and a prior
         uniform over the area (:func:`agents.screening.scan_posterior`, 2N weighted
-        positions), with kernels of :func:`agents.particles.kernel_scale` times its
-        covariance as in :meth:`_silent_step`, and the UCB under that kernel density. The
+        positions), with kernels of :func:`agents.particles.kernel_scale` (of their effective
+        number) times its covariance as in :meth:`_silent_step`, and the UCB under that
+        kernel density. The
         uninformed estimate if the scans rule out every drawn position. Before 0.13.0 such
         steps returned the area's centre, the largest share of the squared error with
         clutter at every sensor."""
@@ -757,7 +764,8 @@ class StateSpaceDGPT(TrackerBase):
         positions, weights = posterior
         mean = weights @ positions
         var = weights @ (positions - mean) ** 2
-        kernel_var = kernel_scale(weights.size, dimension=2) * var
+        # Silverman's rule on the effective number of the importance-weighted positions
+        kernel_var = kernel_scale(1.0 / np.sum(weights**2), dimension=2) * var
         ucb = agg.mixture_half_width(
             weights,
             positions - mean,
@@ -766,12 +774,23 @@ class StateSpaceDGPT(TrackerBase):
         )
         return Estimate(mean, var + kernel_var, ucb)
 
+    def _carries_error_excess(self) -> bool:
+        """Whether the tracker carries its error's excess over the broadcast posterior from
+        step to step (``error_excess_``): RBCM, GPoE and PoE without turn modes. BCM's
+        posterior is its error's. With turn modes one pooled excess added to every mode's
+        mixed prior over-widens GPoE and PoE (targets drawn from the NCV model: mean NEES
+        1.25 and 1.09 against 1.62 and 1.71 without it, nominal 2); a per-mode excess mixed
+        by the IMM would be needed, so the registered trackers (which have turn modes) take
+        the broadcast prior's covariance as their prior error's, as in 0.12.0."""
+        return self.aggregation != "bcm" and not self.turn_rates
+
     def _error_prior_covs(self, prior_covs, dt):
         """The covariance of the step's prior errors (H, 2, 2, 2): each prediction's
         covariance plus the error's excess over the broadcast posterior (``error_excess_``)
-        carried ``dt`` by the NCV transition, or None without an excess (BCM, a new track,
-        after a gap). A sum that is not positive definite (RBCM's excess is negative: its
-        posterior is wider than its error) falls back to the prediction's covariance."""
+        carried ``dt`` by the NCV transition (the process noise is in both and cancels), or
+        None without an excess (BCM, turn modes, a new track, after a gap). A sum that is not
+        positive definite (an excess left from another prior, e.g. after the hybrid set the
+        estimate) falls back to the prediction's covariance."""
         if self.error_excess_ is None:
             return None
         summed = prior_covs + _carry(self.error_excess_, dt)
@@ -794,8 +813,9 @@ class StateSpaceDGPT(TrackerBase):
         the aggregate's error (the UCB's). Arrays are per hypothesis first, then axis:
         ``summaries`` and ``summary_var`` (H, 2, M), ``log_weight`` (H,), ``mean`` (H, 2, 2),
         ``cov`` (H, 2, 2, 2), ``expert_means`` (H, 2, M, 2), ``expert_covs``
-        (H, 2, M, 2, 2), ``error_std`` (H, 2); ``sensors`` (M,) the experts. Except with
-        BCM, also ``error_cov`` (H, 2, 2, 2), the covariance of the aggregate's error when
+        (H, 2, M, 2, 2), ``error_std`` (H, 2); ``sensors`` (M,) the experts. When the
+        tracker carries its error's excess (:meth:`_carries_error_excess`), also
+        ``error_cov`` (H, 2, 2, 2), the covariance of the aggregate's error when
         the prior's error has covariance ``error_prior_covs`` (H, 2, 2, 2; default the
         prior's; :func:`agents.state_space.aggregate_error_cov`), whose position entry is
         then ``error_std`` squared."""
@@ -840,7 +860,7 @@ class StateSpaceDGPT(TrackerBase):
             "expert_means": expert_means,
             "expert_covs": expert_covs,
         }
-        if self.aggregation == "bcm":  # the exact posterior: its error is its own variance
+        if not self._carries_error_excess():
             hypotheses["error_std"] = np.sqrt(
                 aggregate_error_var(self.aggregation, position_var, summary_var)
             )
@@ -973,6 +993,7 @@ class StateSpaceDGPT(TrackerBase):
             raise RuntimeError("set_estimate needs a prior: call it after an update that had one")
         mean, cov = condition_on_position(*self.prior_state_, estimate, var)
         self.mean_, self.cov_ = mean, cov
+        self.error_excess_ = None  # the hybrid's posterior is taken as exact
         if self.turn_rates:
             shape = self.prior_modes_[0].shape[:-1]  # (modes, axes)
             mode_means, mode_covs = condition_on_position(

@@ -22,6 +22,7 @@ from agents.screening import (
     initiation_scores,
     joint_sensing_probability,
     scan_likelihood_ratio,
+    scan_log_likelihood_ratio,
     scan_log_likelihood_ratios,
     scan_posterior,
     sensing_probability,
@@ -72,6 +73,27 @@ def test_scan_likelihood_ratio_equals_the_sum_over_target_subsets(
     )
     expected = dense_likelihood_ratio(z, x, var, detection_rate, clutter_rate, area)
     assert ratio[0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_log_likelihood_ratio_is_the_log_of_the_ratio_and_does_not_overflow():
+    """Scans of 1-6 points: the log form equals the log of :func:`scan_likelihood_ratio`
+    (-inf for a scan without a point near x); a scan of 400 points at x, whose ratio
+    overflows to inf, keeps a finite log: -1 + 400 log(1 + 0.159 / 1e-4) - log(1 - e^-1)."""
+    rng = np.random.default_rng(0)
+    densities = np.r_[rng.uniform(0.0, 0.16, 12), 0.0]
+    groups = np.r_[np.repeat(np.arange(4), 3), 4]
+    ratio = scan_likelihood_ratio(densities, groups, 5, 1.3, 1e-4)
+    got = scan_log_likelihood_ratio(densities, groups, 5, 1.3, 1e-4)
+    np.testing.assert_allclose(got[:4], np.log(ratio[:4]), rtol=1e-12)
+    assert got[4] == -np.inf
+    peak = 1.0 / (2.0 * np.pi)
+    with np.errstate(over="ignore"):
+        assert (
+            scan_likelihood_ratio(np.full(400, peak), np.zeros(400, int), 1, 1.0, 1e-4)[0] == np.inf
+        )
+    many = scan_log_likelihood_ratio(np.full(400, peak), np.zeros(400, int), 1, 1.0, 1e-4)[0]
+    expected = -1.0 + 400 * math.log1p(peak / 1e-4) - math.log(-math.expm1(-1.0))
+    assert many == pytest.approx(expected, rel=1e-12)
 
 
 def test_scan_likelihood_ratio_of_a_scan_without_target_points_is_zero():

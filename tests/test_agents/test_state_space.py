@@ -184,6 +184,23 @@ def test_aggregate_error_cov_is_the_dense_aggregates_error_covariance(method, se
         np.testing.assert_allclose(own, posterior_cov, rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.parametrize("aggregation", ["rbcm", "gpoe"])
+def test_the_error_excess_is_carried_only_without_turn_modes(aggregation):
+    """Without turn modes RBCM and GPoE carry their error's excess over the broadcast
+    posterior (the test below shows its effect); with turn modes (the registered trackers)
+    they do not: one pooled excess over-widens GPoE and PoE there
+    (``StateSpaceDGPT._carries_error_excess``)."""
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
+    rng = np.random.default_rng(5)
+    for turn_rates, carried in [((), True), ((0.35, -0.35), False)]:
+        tracker = StateSpaceDGPT(aggregation=aggregation, turn_rates=turn_rates)
+        tracker.reset(spec)
+        for t in range(5):
+            truth = np.array([5.0 + 2.0 * t, 3.0 - t])
+            tracker.update(measurement_obs(t, truth + rng.normal(0.0, 1.0, (3, 2)), [0, 1, 2]))
+        assert (tracker.error_excess_ is not None) == carried
+
+
 def test_rbcm_error_variance_is_what_states_drawn_from_the_model_give():
     """Monte Carlo under the model (state from the prior, summaries = position + noise): the
     sample variance of RBCM's position error matches :func:`aggregate_error_var` within
