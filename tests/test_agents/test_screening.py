@@ -308,19 +308,32 @@ def test_scan_posterior_mean_matches_a_dense_grid():
     assert np.linalg.norm(mean - target) < 1.0
 
 
-def test_scan_posterior_weighs_an_uncovered_region_against_a_point():
-    """One sensor in a 200 m area reports one point: the posterior puts the mass of its
-    likelihood ratio (about 0.58 x 7854 m^2) at the point and ratio 1 on the 32146 m^2 that
-    no sensor covers, so the mean lies between the point and the uncovered region's centre
-    (87 % of the mass there). Against a 0.25 m grid over the area; tolerance 4 importance-
-    sampling standard errors."""
+def test_scan_posterior_weighs_an_uncovered_region_against_points():
+    """One sensor in a 200 m area reports two points far apart: the posterior puts the mass
+    of one point's likelihood ratio (about 0.58 x 7854 m^2) at each and ratio 1 on the
+    32146 m^2 that no sensor covers (78 % of the mass), so the mean lies between them and
+    the uncovered region's centre. Against a 0.25 m grid over the area: the mean within 4
+    importance-sampling standard errors, and the mass within 5 m of the points within 4
+    binomial-like standard errors sqrt(p (1 - p) / ESS). Getting the proposal density
+    wrong (no correction, or its 1 / m) moves both far outside."""
     spec = problem_spec([[50.0, 50.0]], clutter_sensors="all", area=200.0)
-    mean, standard_error, _, grid_mean, grid_weights, grid = sampled_and_grid_means(
-        np.array([[50.0, 60.0]]), np.array([0]), spec, 40000, 2, 0.25
+    points = np.array([[50.0, 60.0], [30.0, 40.0]])
+    mean, standard_error, ess, grid_mean, grid_weights, grid = sampled_and_grid_means(
+        points, np.array([0, 0]), spec, 40000, 2, 0.25
     )
     uncovered = np.hypot(*(grid - 50.0).T) > 50.0
-    assert grid_weights[uncovered].sum() / grid_weights.sum() == pytest.approx(0.875, abs=0.01)
+    assert grid_weights[uncovered].sum() / grid_weights.sum() == pytest.approx(0.78, abs=0.01)
     assert np.all(np.abs(mean - grid_mean) <= 4.0 * standard_error)
+    positions, weights = scan_posterior(
+        points, np.array([0, 0]), spec, 1.0, 40000, np.random.default_rng(2)
+    )
+
+    def near(at):  # within 5 m of either point
+        return np.min(np.hypot(*(at[:, None, :] - points[None]).transpose(2, 0, 1)), axis=1) < 5.0
+
+    grid_mass = grid_weights[near(grid)].sum() / grid_weights.sum()
+    mass = weights[near(positions)].sum()
+    assert abs(mass - grid_mass) <= 4.0 * np.sqrt(grid_mass * (1.0 - grid_mass) / ess)
 
 
 def test_initiation_scores_need_every_covering_sensor_to_agree():
