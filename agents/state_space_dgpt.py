@@ -444,7 +444,7 @@ class StateSpaceDGPT(TrackerBase):
         self.data_step_ = 0
         self.particles_ = None  # (states (N, 2, 2), weights (N,), modes (N,) or None) in a gap
         # the covariance of the broadcast posterior mean's error minus the posterior's
-        # (2, 2, 2): None for BCM, whose posterior is its error's, and at a track's start
+        # (2, 2, 2): None when not carried (_carries_error_excess) and at a track's start
         self.error_excess_: np.ndarray | None = None
         self.modes_ = None  # with turn modes: (means (K, 2, 2), covs (K, 2, 2, 2), probs (K,))
         self.mixed_ = None  # (modes_, their IMM mixing: means, covs, predicted probabilities)
@@ -629,10 +629,9 @@ class StateSpaceDGPT(TrackerBase):
         their kernel density: Gaussian kernels of covariance
         :func:`agents.particles.kernel_scale` times the predicted particles' covariance
         (Silverman's bandwidth), so that a few surviving particles do not report a variance
-        near zero. The resampled particles are not
-        jittered with those kernels: on training seeds 1000-1011 that drifted tracks (RMSE
-        on the reference paths 2.15 m above dgpt-bcm's, against 1.10 m below without
-        the jitter). If every particle lies in a disc (the model cannot explain the
+        near zero. The resampled particles are not jittered with those kernels: on training
+        seeds 1000-1011 that drifted tracks (RMSE on the reference paths 2.15 m above
+        dgpt-bcm's, against 1.10 m below without the jitter). If every particle lies in a disc (the model cannot explain the
         silence), the weights are left as they were. With turn modes each particle also
         carries a mode: drawn with the modes' probabilities at the gap's first step (its state
         from that mode's posterior), moved along the modes' Markov chain at every step, and
@@ -746,10 +745,9 @@ class StateSpaceDGPT(TrackerBase):
         uniform over the area (:func:`agents.screening.scan_posterior`, 2N weighted
         positions), with kernels of :func:`agents.particles.kernel_scale` (of their effective
         number) times its covariance as in :meth:`_silent_step`, and the UCB under that
-        kernel density. The
-        uninformed estimate if the scans rule out every drawn position. Before 0.13.0 such
-        steps returned the area's centre, the largest share of the squared error with
-        clutter at every sensor."""
+        kernel density; the uninformed estimate if the scans rule out every drawn position.
+        The area's centre (0.12.0) was the largest share of the squared error with clutter
+        at every sensor."""
         posterior = scan_posterior(
             points,
             sensors,
