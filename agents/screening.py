@@ -76,10 +76,26 @@ def scan_likelihood_ratio(
         detection_rate: lambda_T > 0.
         clutter_density: c = lambda_c / A_sen > 0.
     """
-    log_product = np.zeros(n_groups)
-    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
+    log_product = _log_products(densities, groups, n_groups, detection_rate, clutter_density)
     # e^-lT (prod - 1) / (1 - e^-lT) with the product in log space: expm1 is exact near 0
     return np.exp(-detection_rate) * np.expm1(log_product) / -np.expm1(-detection_rate)
+
+
+def _log_products(densities, groups, n_groups, detection_rate, clutter_density) -> np.ndarray:
+    """l = sum_j log(1 + lambda_T N_j / c) per scan (n_groups,)."""
+    log_product = np.zeros(n_groups)
+    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
+    return log_product
+
+
+def _near_densities(positions: np.ndarray, points: np.ndarray, noise_var: float):
+    """The (position, point) pairs closer than 6 sigma (beyond, N(z; x, sigma^2 I) is below
+    2e-8 of its peak): ``(position index (p,), point index (p,), N(z; x, sigma^2 I) (p,))``."""
+    near = spatial.cKDTree(positions).sparse_distance_matrix(
+        spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
+    )
+    density = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
+    return near["i"].astype(np.int64), near["j"].astype(np.int64), density
 
 
 def scan_log_likelihood_ratios(
@@ -115,8 +131,7 @@ def scan_log_likelihood_ratios(
     sensor_index = np.arange(sensor_positions.shape[0])
     if awake is not None:
         sensor_index = sensor_index[np.asarray(awake, dtype=bool)]
-    position_tree = spatial.cKDTree(positions)
-    covering = position_tree.sparse_distance_matrix(
+    covering = spatial.cKDTree(positions).sparse_distance_matrix(
         spatial.cKDTree(sensor_positions[sensor_index]), sensing_range, output_type="ndarray"
     )
     pair_position = covering["i"].astype(np.int64)
@@ -125,14 +140,11 @@ def scan_log_likelihood_ratios(
         return np.zeros(n), pair_position, pair_sensor
     n_sensors = sensor_positions.shape[0]
     pair_log_ratio = np.full(pair_position.size, -np.inf)  # no point near: ruled out
-    if points.shape[0]:  # points beyond 6 sigma have densities below 2e-8 of the peak
-        near = position_tree.sparse_distance_matrix(
-            spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
-        )
+    if points.shape[0]:
+        near_position, near_point, densities = _near_densities(positions, points, noise_var)
         # keyed by (position, sensor); the keys of sensors that do not cover the position
         # (or sleep) are never looked up below
-        near_key = near["i"].astype(np.int64) * n_sensors + sensors[near["j"].astype(np.int64)]
-        densities = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
+        near_key = near_position * n_sensors + sensors[near_point]
         if near_key.size:
             order = np.argsort(near_key, kind="stable")
             near_key, densities = near_key[order], densities[order]
@@ -238,15 +250,9 @@ def scan_posterior(
         chosen = rng.integers(0, m, n - n_uniform)
         scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
         positions[n_uniform:] = points[chosen] + scatter
-        near = spatial.cKDTree(positions).sparse_distance_matrix(
-            spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
-        )
-        density = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
+        near_position, _, density = _near_densities(positions, points, noise_var)
         proposal += (
-            (n - n_uniform)
-            / n
-            / m
-            * np.bincount(near["i"].astype(np.int64), weights=density, minlength=n)
+            (n - n_uniform) / n / m * np.bincount(near_position, weights=density, minlength=n)
         )
     log_weight = area_log_likelihood_ratios(
         positions, points, sensors, spec, noise_var, awake
@@ -268,8 +274,7 @@ def scan_log_likelihood_ratio(
     points near x do not overflow: log LR = -lambda_T + l + log(1 - e^(-l)) - log(1 -
     e^(-lambda_T)) with l = sum_j log(1 + lambda_T N_j / c); -inf for scans without a
     point (l = 0)."""
-    log_product = np.zeros(n_groups)
-    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
+    log_product = _log_products(densities, groups, n_groups, detection_rate, clutter_density)
     with np.errstate(divide="ignore"):
         return (
             -detection_rate
@@ -410,7 +415,7 @@ class ClutterScreen:
     prior odds that a given pair of measurements of the two steps is the target's,
     1 / (n_t n_(t-1)); the tracker then restarts from the measurements around it.
 
-    With ``particles`` = N > 0 (the state-space trackers' default) the sensing probabilities
+    With ``particles`` = N > 0 (the registered state-space trackers) the sensing probabilities
     are those of all scans together (:func:`joint_sensing_probability`, N positions drawn
     from the prediction with ``rng``), and a track whose every drawn position the scans rule
     out is lost at once. Per sensor (N = 0, the class default and DGPT's), a clutter point

@@ -261,13 +261,19 @@ def aggregate_error_var(method, prior_var, noise_var):
     inequality over the experts is about sqrt(M) times wider with M experts of equal
     variance."""
     prior_var = np.asarray(prior_var, dtype=float)
+    a, total_gain, pseudo_noise_var = _pseudo_summary(method, prior_var, noise_var)
+    scaled_prior = prior_var / a
+    k = scaled_prior / (scaled_prior + 1.0 / total_gain)
+    return (1.0 - k) ** 2 * prior_var + k**2 * pseudo_noise_var
+
+
+def _pseudo_summary(method, prior_var, noise_var):
+    """``(a, G, sum g_i^2 s_i / G^2)`` of :func:`fused_update`'s update of N(mu_0, P_0 / a)
+    with the pseudo-summary sum g_i z_i / G (:func:`_fusion_weights`)."""
     noise_var = np.asarray(noise_var, dtype=float)
     gain, a = _fusion_weights(method, prior_var, noise_var)
     total_gain = gain.sum(axis=-1)
-    scaled_prior = prior_var / a
-    k = scaled_prior / (scaled_prior + 1.0 / total_gain)
-    pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
-    return (1.0 - k) ** 2 * prior_var + k**2 * pseudo_noise_var
+    return a, total_gain, (gain**2 * noise_var).sum(axis=-1) / total_gain**2
 
 
 def aggregate_error_cov(method, prior_cov, error_prior_cov, noise_var):
@@ -289,12 +295,9 @@ def aggregate_error_cov(method, prior_cov, error_prior_cov, noise_var):
     step their E_0 is wider than their P_0 (:class:`agents.state_space_dgpt.StateSpaceDGPT`)."""
     prior_cov = np.asarray(prior_cov, dtype=float)
     error_prior_cov = np.asarray(error_prior_cov, dtype=float)
-    noise_var = np.asarray(noise_var, dtype=float)
-    gain, a = _fusion_weights(method, prior_cov[..., 0, 0], noise_var)
-    total_gain = gain.sum(axis=-1)
+    a, total_gain, pseudo_noise_var = _pseudo_summary(method, prior_cov[..., 0, 0], noise_var)
     scaled_first_column = prior_cov[..., :, 0] / a[..., None]
     kalman_gain = scaled_first_column / (scaled_first_column[..., :1] + 1.0 / total_gain[..., None])
-    pseudo_noise_var = (gain**2 * noise_var).sum(axis=-1) / total_gain**2
     keep = np.eye(2) - kalman_gain[..., :, None] * np.array([1.0, 0.0])
     return keep @ error_prior_cov @ np.swapaxes(keep, -1, -2) + pseudo_noise_var[
         ..., None, None
