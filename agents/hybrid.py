@@ -44,7 +44,11 @@ __all__ = [
     "HybridFilter",
     "paper_posterior",
     "exact_posterior",
+    "gaussian_sums",
     "GaussianSumPosterior",
+    "mixture_posterior",
+    "MixturePosterior",
+    "PRIOR_MODELS",
     "VARIANTS",
     "SCAN_MODELS",
     "GP_MODELS",
@@ -64,6 +68,20 @@ nominal 1.39 (0.83 to 1.18 and 0.78 to 1.16): eq. (42) lets every sensor's point
 clutter, so it trusts the agreement between sensors too little."""
 GP_MODELS = {"se": DGPT, "ncv": StateSpaceDGPT}
 """The DGPT the filter wraps: the paper's SE model, or the NCV GP in state-space form."""
+PRIOR_MODELS = ("mixture", "moments")
+"""The exact variant's prior around the state-space DGPT (``gp="ncv"``): ``"mixture"``, the
+DGPT's prediction as it is, one Gaussian per IMM mode and process-noise component
+(:func:`mixture_posterior`; each component's state is then conditioned on its own posterior,
+:meth:`agents.state_space_dgpt.StateSpaceDGPT.set_posterior`), or ``"moments"``, that
+mixture's single moment-matched Gaussian (0.9.0-0.13.0). The SE DGPT's prediction and the
+paper variant's prior are one Gaussian: ``"moments"``.
+
+Chosen on training seeds: see the 0.14.0 section of docs/analysis.md. Under ``"moments"``
+the manoeuvre component (probability 0.02, 400 m^2/s^3) is folded into a prior a few metres
+wide; when the target turns sharply (S4), the points it reports lie many prior standard
+deviations off, the Gaussian sum explains them as clutter and settles on clutter near the
+prior with a standard deviation of about 1 m, and the DGPT's own update, which weighs its
+hypotheses by their likelihood, stays with the target."""
 REACQUIRE_RULES = ("dgpt", "none")
 """What the exact variant does at the first step with measurements after steps without any
 (a coverage gap): ``"dgpt"`` answers with the DGPT's own estimate, ``"none"`` applies the
@@ -108,12 +126,16 @@ class GaussianSumPosterior:
     """Moments of the exact posterior and what the pruning dropped.
 
     ``pruned_mass`` bounds the total variation between the returned and the exact posterior
-    mixture (relative weight of the dropped components)."""
+    mixture (relative weight of the dropped components). ``log_evidence`` is the log of the
+    prior's integral against the likelihood, int N(x; mu, diag(P)) prod_j (c + lambda_T
+    N(z_j; x, sigma_z^2 I)) dx (per-sensor model: its factors), less the pruned
+    components' share: what weighs one prior against another (:func:`mixture_posterior`)."""
 
     mean: np.ndarray
     var: np.ndarray
     n_components: int
     pruned_mass: float
+    log_evidence: float = 0.0
 
 
 def exact_posterior(
@@ -145,74 +167,192 @@ def exact_posterior(
     target point from every reporting sensor remain. The pre-gate then keeps every
     measurement of a sensor none of whose measurements passes it.
     """
+    result = gaussian_sums(
+        np.asarray(prior_mean, dtype=float)[None, :],
+        np.asarray(prior_var, dtype=float)[None, :],
+        measurements,
+        likelihood,
+        prune_tolerance,
+        max_components,
+        sensors,
+    )
+    return GaussianSumPosterior(
+        result.mean[0],
+        result.var[0],
+        int(result.n_components[0]),
+        float(result.pruned_mass[0]),
+        float(result.log_evidence[0]),
+    )
+
+
+def gaussian_sums(
+    prior_means: np.ndarray,
+    prior_vars: np.ndarray,
+    measurements: np.ndarray,
+    likelihood: PoissonLikelihood,
+    prune_tolerance: float = 1e-9,
+    max_components: int = 256,
+    sensors: np.ndarray | None = None,
+) -> GaussianSumPosterior:
+    """:func:`exact_posterior` of H priors at once, N(x; mu_h, diag(P_h)) (``prior_means``,
+    ``prior_vars`` (H, 2)), under the same measurements: every field of the result has a
+    leading axis H. The components of all priors are built in one pass over the
+    measurements, each carrying its prior's index; a measurement that one prior's pre-gate
+    skips splits only into its clutter branch there. Each prior's numbers are those of
+    :func:`exact_posterior` alone, up to rounding."""
     noise_var = likelihood.noise_std**2
     log_clutter = np.log(likelihood.clutter_density) if likelihood.clutter_rate > 0 else -np.inf
     log_rate = np.log(likelihood.detection_rate)
-    means = np.asarray(prior_mean, dtype=float)[None, :]
-    variances = np.asarray(prior_var, dtype=float)[None, :]
-    log_weights = np.zeros(1)
-    pruned = 0.0
+    count = prior_means.shape[0]
+    means, variances = prior_means.copy(), prior_vars.copy()
+    owner = np.arange(count)  # each component's prior
+    log_weights = np.zeros(count)
+    log_scale = np.zeros(count)  # prior h's log weights are relative to exp(log_scale[h])
+    pruned = np.zeros(count)
     groups = np.zeros(measurements.shape[0], dtype=np.int64) if sensors is None else sensors
-    # Pre-gate: a measurement whose target branch is already negligible against the prior
+    # Pre-gate: a measurement whose target branch is already negligible against a prior's
     # predictive (ratio to the clutter branch below the tolerance) can only be clutter for
-    # every component; it multiplies all weights by the same c and is skipped. Its ratio is
-    # added to the reported pruned mass.
+    # every component of that prior: it multiplies their weights by the same c and is
+    # skipped there. Its ratio is added to the prior's pruned mass.
+    skipped = np.zeros((count, measurements.shape[0]), dtype=bool)
     if likelihood.clutter_rate > 0 and measurements.shape[0]:
-        predictive = variances[0] + noise_var
+        predictive = prior_vars[:, None, :] + noise_var
         log_ratio = (
             log_rate
             - log_clutter
             - 0.5
             * np.sum(
-                (measurements - means[0]) ** 2 / predictive + np.log(2.0 * np.pi * predictive),
-                axis=1,
+                (measurements - prior_means[:, None, :]) ** 2 / predictive
+                + np.log(2.0 * np.pi * predictive),
+                axis=-1,
             )
         )
-        negligible = log_ratio < np.log(prune_tolerance)
+        skipped = log_ratio < np.log(prune_tolerance)
         if sensors is not None:  # a sensor's target point is among its measurements
-            negligible &= np.isin(groups, groups[~negligible])
-        pruned = float(np.sum(np.exp(log_ratio[negligible])))
-        measurements, groups = measurements[~negligible], groups[~negligible]
+            for row in skipped:
+                row &= np.isin(groups, groups[~row])
+        pruned = np.sum(np.where(skipped, np.exp(log_ratio), 0.0), axis=1)
+        log_scale += skipped.sum(axis=1) * log_clutter
+        everywhere = skipped.all(axis=0)
+        measurements, groups, skipped = (
+            measurements[~everywhere],
+            groups[~everywhere],
+            skipped[:, ~everywhere],
+        )
     order = np.argsort(groups, kind="stable")
-    measurements, groups = measurements[order], groups[order]
-    has_target = np.zeros(1, dtype=bool)  # per component: a target point of this sensor
+    measurements, groups, skipped = measurements[order], groups[order], skipped[:, order]
+    # last[h, j]: z_j is the last point of its sensor that prior h does not skip, where the
+    # per-sensor model drops h's components with no target point of that sensor
+    last = np.zeros(skipped.shape, dtype=bool)
+    for prior, row in enumerate(skipped):
+        kept = np.flatnonzero(~row)
+        if kept.size:
+            last[prior, kept[np.r_[groups[kept][1:] != groups[kept][:-1], True]]] = True
+    has_target = np.zeros(count, dtype=bool)  # per component: a target point of this sensor
     for index, z in enumerate(measurements):
-        predictive_var = variances + noise_var
-        residual = z - means
+        gated = skipped[owner, index]  # z is clutter for this component's prior
+        split = np.flatnonzero(~gated)  # the components z may be the target of
+        predictive_var = variances[split] + noise_var
+        residual = z - means[split]
         log_target = log_rate - 0.5 * np.sum(
             residual**2 / predictive_var + np.log(2.0 * np.pi * predictive_var), axis=1
         )
-        gain = variances / predictive_var
-        means = np.concatenate([means, means + gain * residual])
-        variances = np.concatenate([variances, (1.0 - gain) * variances])
-        log_weights = np.concatenate([log_weights + log_clutter, log_weights + log_target])
-        has_target = np.concatenate([has_target, np.ones(has_target.size, dtype=bool)])
+        gain = variances[split] / predictive_var
+        clutter = np.where(gated, 0.0, log_clutter)  # skipped: already in the scale
+        means = np.concatenate([means, means[split] + gain * residual])
+        variances = np.concatenate([variances, (1.0 - gain) * variances[split]])
+        log_weights = np.concatenate([log_weights + clutter, log_weights[split] + log_target])
+        owner = np.concatenate([owner, owner[split]])
+        has_target = np.concatenate([has_target, np.ones(split.size, dtype=bool)])
         valid = np.ones(log_weights.size, dtype=bool)
-        last_of_sensor = index + 1 == groups.size or groups[index + 1] != groups[index]
-        if sensors is not None and last_of_sensor:
-            valid = has_target  # the model has no "all of this sensor's points are clutter"
-            has_target = np.zeros(has_target.size, dtype=bool)
-        log_weights -= np.max(log_weights[valid])
+        if sensors is not None:
+            # the model has no "all of this sensor's points are clutter"
+            ends = last[owner, index]
+            valid = has_target | ~ends
+            has_target = has_target & ~ends
+        largest = np.full(count, -np.inf)
+        np.maximum.at(largest, owner[valid], log_weights[valid])
+        largest = np.where(np.isfinite(largest), largest, 0.0)
+        log_weights -= largest[owner]
+        log_scale += largest
         weights = np.zeros(log_weights.size)
-        weights[valid] = np.exp(log_weights[valid])
-        total = weights.sum()
+        weights[valid] = np.exp(log_weights[valid])  # the invalid may lie far above
+        total = np.bincount(owner, weights, minlength=count)
         # Within a sensor, the components with none of its points as the target's yet are
         # kept whatever their weight (they branch into its later points) and are not the
         # reference of the pruning: they are dropped at its last point.
         pending = np.zeros(valid.size, dtype=bool) if sensors is None else valid & ~has_target
-        reference = total if not np.any(valid & ~pending) else weights[valid & ~pending].sum()
-        keep = valid & ((weights >= prune_tolerance * reference) | pending)
-        if keep.sum() > max_components:
-            keep &= (weights >= np.sort(weights[keep])[-max_components]) | pending
-        pruned_now = weights[valid & ~keep].sum() / total
-        pruned = pruned + (1.0 - pruned) * pruned_now
+        settled = valid & ~pending
+        reference = np.where(
+            np.bincount(owner, settled, minlength=count) > 0,
+            np.bincount(owner, np.where(settled, weights, 0.0), minlength=count),
+            total,
+        )
+        keep = valid & ((weights >= prune_tolerance * reference[owner]) | pending)
+        for prior in np.flatnonzero(np.bincount(owner[keep], minlength=count) > max_components):
+            own = keep & (owner == prior)
+            keep &= (owner != prior) | (weights >= np.sort(weights[own])[-max_components]) | pending
+        dropped = np.bincount(owner, np.where(valid & ~keep, weights, 0.0), minlength=count)
+        pruned = pruned + (1.0 - pruned) * dropped / np.where(total > 0, total, 1.0)
         means, variances, log_weights = means[keep], variances[keep], log_weights[keep]
-        has_target = has_target[keep]
-    weights = np.exp(log_weights - np.max(log_weights))
-    weights /= weights.sum()
-    mean = weights @ means
-    var = weights @ (variances + (means - mean) ** 2)
-    return GaussianSumPosterior(mean, var, int(weights.size), float(pruned))
+        owner, has_target = owner[keep], has_target[keep]
+    weights = np.exp(log_weights)  # each prior's largest kept is at most 1: no overflow
+    total = np.bincount(owner, weights, minlength=count)
+    weights /= total[owner]
+    mean = np.stack([np.bincount(owner, weights * means[:, a], minlength=count) for a in (0, 1)], 1)
+    spread = variances + (means - mean[owner]) ** 2
+    var = np.stack([np.bincount(owner, weights * spread[:, a], minlength=count) for a in (0, 1)], 1)
+    return GaussianSumPosterior(
+        mean,
+        var,
+        np.bincount(owner, minlength=count),
+        pruned,
+        log_scale + np.log(total),
+    )
+
+
+@dataclass(frozen=True)
+class MixturePosterior:
+    """The exact posterior under a Gaussian-mixture prior: per prior component h its
+    posterior probability (``log_weights`` (H,), normalised) and the moments of its own
+    posterior (``means``, ``vars`` (H, 2)); the mixture's moments (``mean``, ``var`` (2,));
+    and the dropped mass, the components' ``pruned_mass`` weighted by their probabilities."""
+
+    log_weights: np.ndarray
+    means: np.ndarray
+    vars: np.ndarray
+    mean: np.ndarray
+    var: np.ndarray
+    pruned_mass: float
+
+
+def mixture_posterior(
+    log_priors: np.ndarray,
+    prior_means: np.ndarray,
+    prior_vars: np.ndarray,
+    measurements: np.ndarray,
+    likelihood: PoissonLikelihood,
+    prune_tolerance: float = 1e-9,
+    sensors: np.ndarray | None = None,
+) -> MixturePosterior:
+    """The exact posterior of the prior sum_h pi_h N(x; mu_h, diag(P_h)) (``log_priors``
+    (H,), ``prior_means`` and ``prior_vars`` (H, 2)) under the measurement model of
+    :func:`exact_posterior`: each component's posterior is its :func:`exact_posterior`,
+    and its probability is pi_h times its evidence, normalised. The state-space DGPT's
+    prediction is such a mixture (its IMM modes and process-noise components); the hybrid
+    updates each component, so a component that the measurements favour (a manoeuvre, a
+    turn) gains weight instead of the measurements being explained as clutter around the
+    collapsed prior."""
+    posteriors = gaussian_sums(
+        prior_means, prior_vars, measurements, likelihood, prune_tolerance, sensors=sensors
+    )
+    log_weights = np.asarray(log_priors, dtype=float) + posteriors.log_evidence
+    log_weights = log_weights - np.logaddexp.reduce(log_weights)
+    weights = np.exp(log_weights)
+    mean = weights @ posteriors.mean
+    var = weights @ (posteriors.var + (posteriors.mean - mean) ** 2)
+    pruned = float(weights @ posteriors.pruned_mass)
+    return MixturePosterior(log_weights, posteriors.mean, posteriors.var, mean, var, pruned)
 
 
 _paper_variant_warned = False
@@ -253,6 +393,8 @@ class HybridFilter(TrackerBase):
         scan_model: the exact variant's measurement model (:data:`SCAN_MODELS`); with
             ``clutter_sensors="all"`` a reporting sensor need not sense the target, and eq.
             (42) is used.
+        prior_model: the exact variant's prior around ``gp="ncv"`` (:data:`PRIOR_MODELS`);
+            None: ``"mixture"`` there, ``"moments"`` otherwise (the only choice).
         **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window, ...).
     """
 
@@ -266,6 +408,7 @@ class HybridFilter(TrackerBase):
         reacquire: str = "none",
         gp: str = "ncv",
         scan_model: str = "per-sensor",
+        prior_model: str | None = None,
         **dgpt_kwargs,
     ) -> None:
         self.variant = check_choice("variant", variant, VARIANTS)
@@ -285,6 +428,16 @@ class HybridFilter(TrackerBase):
                     "gaps without the silence (0); got "
                     f"{dgpt_kwargs['silence_particles']!r}"
                 )
+        mixture_allowed = self.gp == "ncv" and self.variant == "exact"
+        if prior_model is None:
+            prior_model = "mixture" if mixture_allowed else "moments"
+        self.prior_model = check_choice("prior_model", prior_model, PRIOR_MODELS)
+        if self.prior_model == "mixture" and not mixture_allowed:
+            raise ValueError(
+                "prior_model: 'mixture' needs variant='exact' and gp='ncv' (the SE DGPT "
+                "predicts one Gaussian, and eqs. (50)-(51) take one); got variant="
+                f"{self.variant!r}, gp={self.gp!r}"
+            )
         self.dgpt = GP_MODELS[self.gp](delta=delta, **dgpt_kwargs)
         inputs = self.dgpt.inputs if self.gp == "se" else "ncv"
         self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{inputs}"
@@ -346,20 +499,35 @@ class HybridFilter(TrackerBase):
             return learned
         if self.variant == "paper":
             mean, var = paper_posterior(prior[0], prior[1], measurements, self.likelihood_)
+            prior_next = self.dgpt.set_estimate(mean, var)
         else:
             # with clutter at every sensor a reporting sensor need not sense the target
             per_sensor = self.scan_model == "per-sensor" and self.spec_.clutter_sensors != "all"
             sensors = np.asarray(obs["sensor"])[mask] if per_sensor else None
-            result = exact_posterior(
-                prior[0],
-                prior[1],
-                measurements,
-                self.likelihood_,
-                self.prune_tolerance,
-                sensors=sensors,
-            )
+            predictions = self.dgpt.step_predictions_ if self.prior_model == "mixture" else None
+            if predictions is not None:
+                log_priors, state_means, state_covs, _ = predictions
+                result = mixture_posterior(
+                    log_priors,
+                    state_means[..., 0],
+                    state_covs[..., 0, 0],
+                    measurements,
+                    self.likelihood_,
+                    self.prune_tolerance,
+                    sensors=sensors,
+                )
+                prior_next = self.dgpt.set_posterior(result.log_weights, result.means, result.vars)
+            else:
+                result = exact_posterior(
+                    prior[0],
+                    prior[1],
+                    measurements,
+                    self.likelihood_,
+                    self.prune_tolerance,
+                    sensors=sensors,
+                )
+                prior_next = self.dgpt.set_estimate(result.mean, result.var)
             mean, var = result.mean, result.var
             self.pruned_mass_ = max(self.pruned_mass_, result.pruned_mass)
-        prior_next = self.dgpt.set_estimate(mean, var)
         bound = np.sqrt(2.0 * np.log(1.0 / self.delta) * var)
         return Estimate(mean, var, bound, prior_next)

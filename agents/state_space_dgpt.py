@@ -426,6 +426,9 @@ class StateSpaceDGPT(TrackerBase):
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
         self.next_modes_ = self.prior_modes_ = None  # with turn modes: the same per mode
+        # the last step's predictions, one per hypothesis, for the hybrid filter: log prior
+        # probabilities (H,), means (H, 2, 2), covs (H, 2, 2, 2), modes (H,) or None
+        self.step_predictions_ = None
         self.fits_ = 0
         self.fits_at_bound_ = 0
         self._start_track()
@@ -512,6 +515,7 @@ class StateSpaceDGPT(TrackerBase):
         step = int(obs["t"])
         self.prior_state_ = self.next_state_
         self.prior_modes_ = self.next_modes_
+        self.step_predictions_ = None
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
@@ -550,6 +554,12 @@ class StateSpaceDGPT(TrackerBase):
             )
         dt = (step - self.last_step_) * spec.dt
         predictions, modes = self._predictions(dt, np.exp(self.log_q_), self.manoeuvre)
+        self.step_predictions_ = (
+            np.log(np.maximum([probability for _, probability in predictions], 1e-300)),
+            np.stack([prediction[0] for prediction, _ in predictions]),
+            np.stack([prediction[1] for prediction, _ in predictions]),
+            modes,
+        )
         if not points.shape[0]:
             log_weights = np.log([probability for _, probability in predictions])
             means = np.stack([prediction[0] for prediction, _ in predictions], axis=-2)
@@ -998,6 +1008,30 @@ class StateSpaceDGPT(TrackerBase):
                 *self.prior_modes_, np.broadcast_to(estimate, shape), np.broadcast_to(var, shape)
             )
             self.modes_ = (mode_means, mode_covs, self.modes_[2])
+        if self.data_mean_ is not None and self.data_step_ == self.last_step_:
+            self.data_mean_, self.data_cov_ = mean, cov
+        return self._predict_next(mean, cov)
+
+
+    def set_posterior(self, log_weights, position_means, position_vars):
+        """Take the hybrid filter's posterior over this step's predictions
+        (``step_predictions_``, one per hypothesis h) in place of the tracker's own: each
+        prediction's state conditioned on its posterior position N(``position_means[h]``,
+        ``position_vars[h]``) ((H, 2) each; :func:`agents.state_space.condition_on_position`),
+        weighted by the posterior log probabilities ``log_weights`` (H,). The broadcast state
+        is their mixture's moments and, with turn modes, each mode's posterior is the mixture
+        of its own hypotheses, as in the tracker's own step; the learning window's prior for
+        the next step with data is the broadcast state. Returns the next-step prediction
+        (mean, var) of the position."""
+        if self.step_predictions_ is None:
+            raise RuntimeError("set_posterior needs this step's predictions: call it after update")
+        _, prior_means, prior_covs, modes = self.step_predictions_
+        means, covs = condition_on_position(prior_means, prior_covs, position_means, position_vars)
+        means, covs = np.swapaxes(means, 0, 1), np.swapaxes(covs, 0, 1)  # (axis, H, ...)
+        mean, cov = reduce_mixture(log_weights, means, covs)
+        self.mean_, self.cov_ = mean, cov
+        self.error_excess_ = None  # the hybrid's posterior is taken as exact
+        self.modes_ = self._mode_posteriors(modes, log_weights, means, covs)
         if self.data_mean_ is not None and self.data_step_ == self.last_step_:
             self.data_mean_, self.data_cov_ = mean, cov
         return self._predict_next(mean, cov)

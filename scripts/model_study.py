@@ -55,6 +55,7 @@ CANDIDATES = {
     "gp-trend": ("baselines.standard_gp:StandardGP", {"window": 3}),
     "hybrid-trend": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
+    "hybrid-ncv-moments": ("agents.hybrid:HybridFilter", {"gp": "ncv", "prior_model": "moments"}),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     "hybrid-ncv-per-sensor": (
         "agents.hybrid:HybridFilter",

@@ -3,9 +3,18 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from conftest import median_in_band, mixture_moments, problem_spec, sensed_calibration
 
-from agents.hybrid import HybridFilter, exact_posterior, paper_posterior
+from agents.hybrid import (
+    GaussianSumPosterior,
+    HybridFilter,
+    exact_posterior,
+    gaussian_sums,
+    mixture_posterior,
+    paper_posterior,
+)
 from agents.likelihood import PoissonLikelihood
 from agents.state_space import condition_on_position, ncv_predict, turn_predict
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
@@ -124,6 +133,128 @@ def test_per_sensor_exact_posterior_equals_grid_integration():
     assert result.pruned_mass < 1e-6
     eq42 = exact_posterior(prior_mean, prior_var, measurements, LIKELIHOOD)
     assert np.max(np.abs(eq42.mean - result.mean)) > 0.05
+
+
+GRID_STEP = 0.02
+GRID = np.stack(np.meshgrid(*[np.arange(-12.0, 12.0, GRID_STEP)] * 2, indexing="ij"), -1).reshape(
+    -1, 2
+)
+
+
+def eq42_log_likelihood(grid, measurements, model=LIKELIHOOD):
+    """log prod_j (c + lambda_T N(z_j; x, sigma_z^2 I)) on grid points (g, 2)."""
+    squared = np.sum((grid[:, None, :] - measurements[None]) ** 2, axis=-1)
+    density = np.exp(-0.5 * squared / model.noise_std**2) / (2 * np.pi * model.noise_std**2)
+    c = model.clutter_rate / model.sensing_area
+    return np.sum(np.log(c + model.detection_rate * density), axis=1)
+
+
+def gaussian_log_density(grid, mean, var):
+    return -0.5 * np.sum((grid - mean) ** 2 / var + np.log(2 * np.pi * var), axis=1)
+
+
+def grid_log_integral(log_values):
+    top = log_values.max()
+    return top + np.log(np.sum(np.exp(log_values - top)) * GRID_STEP**2)
+
+
+SCAN = np.array([[1.0, 0.5], [-3.0, 2.5], [0.6, -0.2], [4.0, -1.0], [30.0, 30.0]])
+SCAN_SENSORS = np.array([0, 0, 1, 2, 2])
+
+
+@pytest.mark.parametrize("per_sensor", [False, True])
+def test_log_evidence_equals_grid_integration(per_sensor):
+    """The Gaussian sum's log evidence is log int N(x; mu, diag(P)) L(x) dx, L eq. (42)'s
+    product or the per-sensor model's, integrated on a 0.02 m grid; the point at (30, 30),
+    far outside the prior, is pre-gated as clutter and still counts its factor c."""
+    prior_mean, prior_var = np.array([0.0, 0.0]), np.array([4.0, 2.25])
+    sensors = SCAN_SENSORS if per_sensor else None
+    result = exact_posterior(prior_mean, prior_var, SCAN, LIKELIHOOD, sensors=sensors)
+    likelihood = (
+        per_sensor_log_likelihood(GRID, SCAN, SCAN_SENSORS)
+        if per_sensor
+        else eq42_log_likelihood(GRID, SCAN)
+    )
+    expected = grid_log_integral(gaussian_log_density(GRID, prior_mean, prior_var) + likelihood)
+    # midpoint rule on a prior of std >= 1.5: error far below 1e-6 in the log
+    np.testing.assert_allclose(result.log_evidence, expected, atol=1e-6)
+    assert result.pruned_mass < 1e-12
+
+
+def test_mixture_posterior_equals_grid_integration():
+    """With a two-component prior (0.9 N((0, 0), diag(4, 2.25)) + 0.1 N((3, -2), diag(9,
+    9))) the mixture posterior's moments, component probabilities and component moments
+    match a grid integration under the per-sensor model."""
+    log_priors = np.log([0.9, 0.1])
+    means, variances = np.array([[0.0, 0.0], [3.0, -2.0]]), np.array([[4.0, 2.25], [9.0, 9.0]])
+    result = mixture_posterior(
+        log_priors, means, variances, SCAN, LIKELIHOOD, sensors=SCAN_SENSORS
+    )
+    likelihood = per_sensor_log_likelihood(GRID, SCAN, SCAN_SENSORS)
+    joint = [
+        log_prior + gaussian_log_density(GRID, mean, var) + likelihood
+        for log_prior, mean, var in zip(log_priors, means, variances)
+    ]
+    log_masses = np.array([grid_log_integral(values) for values in joint])
+    np.testing.assert_allclose(
+        result.log_weights, log_masses - np.logaddexp.reduce(log_masses), atol=1e-6
+    )
+    total = np.logaddexp(joint[0], joint[1])
+    weights = np.exp(total - total.max())
+    weights /= weights.sum()
+    mean = weights @ GRID
+    np.testing.assert_allclose(result.mean, mean, atol=1e-4)
+    np.testing.assert_allclose(result.var, weights @ (GRID - mean) ** 2, rtol=1e-3)
+    for component, values in enumerate(joint):
+        own = np.exp(values - values.max())
+        own /= own.sum()
+        np.testing.assert_allclose(result.means[component], own @ GRID, atol=1e-4)
+    assert abs(result.log_weights[1] - np.log(0.1)) > 0.5  # the evidence moved the weights
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_priors=st.integers(1, 4),
+    n_points=st.integers(0, 14),
+    per_sensor=st.booleans(),
+)
+@settings(max_examples=40, deadline=None)
+def test_gaussian_sums_of_many_priors_equal_each_prior_alone(seed, n_priors, n_points, per_sensor):
+    """Built in one pass, each prior's Gaussian sum is the one exact_posterior builds for it
+    alone: the pre-gate, the splits, the per-sensor drops and the pruning are per prior.
+    Priors up to 40 m apart with standard deviations 0.5-30 m, so that a point one prior
+    skips another keeps."""
+    rng = np.random.default_rng(seed)
+    means = rng.uniform(-20.0, 20.0, (n_priors, 2))
+    variances = np.exp(rng.uniform(np.log(0.25), np.log(900.0), (n_priors, 2)))
+    points = rng.uniform(-30.0, 30.0, (n_points, 2))
+    sensors = rng.integers(0, 4, n_points) if per_sensor else None
+    batch = gaussian_sums(means, variances, points, LIKELIHOOD, sensors=sensors)
+    for prior in range(n_priors):
+        alone = exact_posterior(
+            means[prior], variances[prior], points, LIKELIHOOD, sensors=sensors
+        )
+        np.testing.assert_allclose(batch.mean[prior], alone.mean, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(batch.var[prior], alone.var, rtol=1e-12)
+        np.testing.assert_allclose(batch.log_evidence[prior], alone.log_evidence, rtol=1e-12)
+        np.testing.assert_allclose(batch.pruned_mass[prior], alone.pruned_mass, rtol=1e-9, atol=1e-300)
+        assert batch.n_components[prior] == alone.n_components
+
+
+def test_a_wide_prior_component_takes_points_that_agree_far_from_the_narrow_one():
+    """A sharp turn (eq. (42)): four points agree near (30, 0), 15 standard deviations from
+    the narrow component N(0, 4 I), and one clutter point lies near 0. The mixture's wide
+    component (probability 0.02, N(0, 900 I)) explains the four as the target's and takes
+    almost all the weight; a single Gaussian with the mixture's moments (std 4.7 m) explains
+    them as clutter and stays near 0."""
+    log_priors = np.log([0.98, 0.02])
+    means, variances = np.zeros((2, 2)), np.array([[4.0, 4.0], [900.0, 900.0]])
+    points = np.array([[30.3, 0.2], [29.6, -0.4], [30.1, 0.5], [29.9, 0.1], [1.5, -2.0]])
+    mixture = mixture_posterior(log_priors, means, variances, points, LIKELIHOOD)
+    assert np.exp(mixture.log_weights[1]) > 0.99
+    np.testing.assert_allclose(mixture.mean, [29.98, 0.10], atol=0.2)
+    moments = exact_posterior(np.zeros(2), np.exp(log_priors) @ variances, points, LIKELIHOOD)
+    assert np.linalg.norm(moments.mean) < 3.0
 
 
 def test_a_sensors_only_point_is_its_target_point_however_far():
@@ -352,13 +483,15 @@ def test_paper_hybrid_warns_that_it_assumes_unit_detection_rate():
 
 
 class PriorRecordingHybrid(HybridFilter):
-    """Records the prior, the measurements and their sensors of every step's Poisson update."""
+    """Records the prior (moments, and the DGPT's predictions of the step), the measurements
+    and their sensors of every step's Poisson update."""
 
     def _posterior(self, obs, prior, learned):
         mask = np.asarray(obs["mask"]).astype(bool)
         self.seen_.append(
             (
                 prior,
+                self.dgpt.step_predictions_,
                 np.asarray(obs["measurements"])[mask].copy(),
                 np.asarray(obs["sensor"])[mask].copy(),
                 self.silent_steps_,
@@ -368,16 +501,26 @@ class PriorRecordingHybrid(HybridFilter):
 
 
 @pytest.mark.parametrize(
-    "scan_model, reacquire", [("eq42", "dgpt"), ("per-sensor", "none"), ("per-sensor", "dgpt")]
+    "scan_model, reacquire, prior_model",
+    [
+        ("eq42", "dgpt", "moments"),
+        ("per-sensor", "none", "moments"),
+        ("per-sensor", "dgpt", "moments"),
+        ("eq42", "none", "mixture"),
+        ("per-sensor", "none", "mixture"),
+    ],
 )
-def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound(scan_model, reacquire):
+def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound(
+    scan_model, reacquire, prior_model
+):
     """At every step after the first (and, with reacquire="dgpt", not re-acquiring after a
     gap), the exact hybrid's estimate is the posterior of the DGPT's prior under eq. (42) or
-    the per-sensor model (computed here directly), and its bound is Lemma 1's
-    (2 log(1 / delta))^(1/2) sigma on that posterior."""
+    the per-sensor model (computed here directly): of its moment-matched prediction, or of
+    its predictions' mixture, each weighted by its prior probability times its evidence;
+    and its bound is Lemma 1's (2 log(1 / delta))^(1/2) sigma on that posterior."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
     tracker = PriorRecordingHybrid(
-        window=3, delta=0.003, scan_model=scan_model, reacquire=reacquire
+        window=3, delta=0.003, scan_model=scan_model, reacquire=reacquire, prior_model=prior_model
     )
     tracker.seen_ = []
     obs, info = env.reset(seed=2)
@@ -386,18 +529,30 @@ def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound(scan_
     moved = 0
     for _ in range(60):
         estimate = tracker.update(obs)
-        prior, measurements, sensors, silent_before = tracker.seen_[-1]
+        prior, predictions, measurements, sensors, silent_before = tracker.seen_[-1]
         reacquiring = reacquire == "dgpt" and silent_before and len(measurements)
         if prior is not None and not reacquiring:
-            expected = exact_posterior(
-                prior[0],
-                prior[1],
-                measurements,
-                likelihood,
-                sensors=sensors if scan_model == "per-sensor" else None,
-            )
-            np.testing.assert_array_equal(estimate.mean, expected.mean)
-            np.testing.assert_array_equal(estimate.var, expected.var)
+            sensors = sensors if scan_model == "per-sensor" else None
+            if prior_model == "moments":
+                expected = exact_posterior(
+                    prior[0], prior[1], measurements, likelihood, sensors=sensors
+                )
+            else:
+                log_priors, means, covs, _ = predictions
+                components = [
+                    exact_posterior(mean[:, 0], cov[:, 0, 0], measurements, likelihood, sensors=sensors)
+                    for mean, cov in zip(means, covs)
+                ]
+                weights = np.exp(log_priors + [c.log_evidence for c in components])
+                weights /= weights.sum()
+                component_means = np.stack([c.mean for c in components])
+                mean = weights @ component_means
+                var = weights @ (
+                    np.stack([c.var for c in components]) + (component_means - mean) ** 2
+                )
+                expected = GaussianSumPosterior(mean, var, 0, 0.0)
+            np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
+            np.testing.assert_allclose(estimate.var, expected.var, rtol=1e-12)
             # Lemma 1 with delta = 0.003: 2 log(1 / 0.003) = 11.62
             np.testing.assert_allclose(
                 estimate.ucb, np.sqrt(2 * np.log(1 / 0.003) * expected.var), rtol=1e-12
@@ -468,35 +623,79 @@ def test_pruning_keeps_a_sensors_target_point_that_the_all_clutter_branch_outwei
     np.testing.assert_allclose(result.mean, [16.0, 0.0], atol=1e-6)
 
 
-def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior():
+@pytest.mark.parametrize("prior_model", ["moments", "mixture"])
+def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior(prior_model):
     """After every step whose Poisson update ran, the wrapped NCV tracker's broadcast state
-    is the prior state it predicted for the step conditioned on the hybrid's posterior
-    position, mean and variance (condition_on_position), and so is every mode's posterior
-    (its own prior conditioned on the same position), with the probabilities of the
-    tracker's own update; its next prediction is the IMM's from those modes: mixed through
-    the Markov chain, then the NCV mode's (intensity q + p q_m) and each turn mode's
-    prediction, weighted by the modes' predicted probabilities."""
+    and modes are the hybrid's posterior carried to the state. With the moments prior: the
+    prior state it predicted for the step conditioned on the posterior position
+    (condition_on_position), and so is every mode's posterior (its own prior conditioned on
+    the same position), with the probabilities of the tracker's own update. With the
+    mixture prior: each of the step's predictions conditioned on its own posterior
+    position, weighted by its posterior probability (prior times evidence); the broadcast
+    state is their mixture, each mode the mixture of its own predictions' and its
+    probability their total. Either way its next prediction is the IMM's from those modes:
+    mixed through the Markov chain, then the NCV mode's (intensity q + p q_m) and each turn
+    mode's prediction, weighted by the modes' predicted probabilities."""
     env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
-    tracker = HybridFilter(gp="ncv")
+    tracker = HybridFilter(gp="ncv", prior_model=prior_model)
     # the wrapped tracker is the default dgpt-rbcm, as the registered ``hybrid``'s
     assert tracker.dgpt.aggregation == make_tracker("hybrid").dgpt.aggregation == "rbcm"
+    assert make_tracker("hybrid").prior_model == "mixture"
     obs, info = env.reset(seed=1000)
     tracker.reset(info["problem_spec"], seed=1000)
+    likelihood = PoissonLikelihood.from_spec(info["problem_spec"])
     checked = 0
     for _ in range(60):
         prior_state, prior_modes = tracker.dgpt.next_state_, tracker.dgpt.next_modes_
         estimate = tracker.update(obs)
         if prior_state is not None and np.any(obs["mask"]):
-            mean, cov = condition_on_position(*prior_state, estimate.mean, estimate.var)
-            np.testing.assert_allclose(tracker.dgpt.mean_, mean, rtol=1e-12, atol=1e-12)
-            np.testing.assert_allclose(tracker.dgpt.cov_, cov, rtol=1e-12, atol=1e-12)
             dgpt = tracker.dgpt
             mode_means, mode_covs, probabilities = dgpt.modes_
             count = len(probabilities)
-            for mode in range(count):
-                expected = condition_on_position(
-                    prior_modes[0][mode], prior_modes[1][mode], estimate.mean, estimate.var
+            if prior_model == "moments":
+                mean, cov = condition_on_position(*prior_state, estimate.mean, estimate.var)
+                mode_states = [
+                    condition_on_position(
+                        prior_modes[0][mode], prior_modes[1][mode], estimate.mean, estimate.var
+                    )
+                    for mode in range(count)
+                ]
+            else:
+                log_priors, means, covs, modes = dgpt.step_predictions_
+                mask = obs["mask"].astype(bool)
+                posterior = mixture_posterior(
+                    log_priors,
+                    means[..., 0],
+                    covs[..., 0, 0],
+                    obs["measurements"][mask],
+                    likelihood,
+                    sensors=obs["sensor"][mask],
                 )
+                np.testing.assert_allclose(estimate.mean, posterior.mean, rtol=1e-12)
+                states = condition_on_position(means, covs, posterior.means, posterior.vars)
+                axes = [
+                    mixture_moments(posterior.log_weights, states[0][:, a], states[1][:, a])
+                    for a in range(2)
+                ]
+                mean, cov = np.stack([m for m, _ in axes]), np.stack([c for _, c in axes])
+                mode_states = []
+                for mode in range(count):
+                    own = modes == mode
+                    axes = [
+                        mixture_moments(
+                            posterior.log_weights[own], states[0][own, a], states[1][own, a]
+                        )
+                        for a in range(2)
+                    ]
+                    mode_states.append(
+                        (np.stack([m for m, _ in axes]), np.stack([c for _, c in axes]))
+                    )
+                    np.testing.assert_allclose(
+                        probabilities[mode], np.exp(posterior.log_weights[own]).sum(), rtol=1e-9
+                    )
+            np.testing.assert_allclose(dgpt.mean_, mean, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(dgpt.cov_, cov, rtol=1e-12, atol=1e-12)
+            for mode, expected in enumerate(mode_states):
                 np.testing.assert_allclose(mode_means[mode], expected[0], rtol=1e-12, atol=1e-12)
                 np.testing.assert_allclose(mode_covs[mode], expected[1], rtol=1e-12, atol=1e-12)
             transition = dgpt.mode_transition
