@@ -421,13 +421,6 @@ class HybridFilter(TrackerBase):
         self.gp = check_choice("gp", gp, GP_MODELS)
         if self.gp == "ncv":  # the registered ``hybrid`` wraps ``dgpt-rbcm``'s model
             dgpt_kwargs.setdefault("aggregation", "rbcm")
-            if dgpt_kwargs.get("silence_particles", 0):
-                # set_estimate replaces the DGPT's posterior, which a gap's particles carry
-                raise ValueError(
-                    "silence_particles: the hybrid filter's DGPT predicts through coverage "
-                    "gaps without the silence (0); got "
-                    f"{dgpt_kwargs['silence_particles']!r}"
-                )
         mixture_allowed = self.gp == "ncv" and self.variant == "exact"
         if prior_model is None:
             prior_model = "mixture" if mixture_allowed else "moments"
@@ -441,6 +434,11 @@ class HybridFilter(TrackerBase):
         self.dgpt = GP_MODELS[self.gp](delta=delta, **dgpt_kwargs)
         inputs = self.dgpt.inputs if self.gp == "se" else "ncv"
         self.name = f"hybrid-{self.variant}-{self.dgpt.aggregation}-{inputs}"
+
+    @property
+    def silence_particles(self) -> int:
+        """The wrapped DGPT's particles in coverage gaps (0: it does not use the silence)."""
+        return getattr(self.dgpt, "silence_particles", 0)
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         if self.variant == "paper" and spec.detection_rate != 1.0:
@@ -492,6 +490,12 @@ class HybridFilter(TrackerBase):
         self.silent_steps_ = 0 if measurements.shape[0] else self.silent_steps_ + 1
         if prior is None:
             return learned
+        if self.gp == "ncv" and self.dgpt.step_predictions_ is None:
+            # No prediction to update: the DGPT's particles carry a coverage gap
+            # (silence_particles > 0) and its estimate is their posterior given the sensors'
+            # silence (with clutter at every sensor, given every scan, none of which its
+            # screen admitted), or, before a track, the scans' posterior.
+            return learned
         if reacquiring and self.variant == "exact" and self.reacquire == "dgpt":
             # After a gap the prior is an extrapolation that may lie tens of metres off, and
             # the Poisson update of a narrow far prior by a few measurements moves it only
@@ -504,9 +508,8 @@ class HybridFilter(TrackerBase):
             # with clutter at every sensor a reporting sensor need not sense the target
             per_sensor = self.scan_model == "per-sensor" and self.spec_.clutter_sensors != "all"
             sensors = np.asarray(obs["sensor"])[mask] if per_sensor else None
-            predictions = self.dgpt.step_predictions_ if self.prior_model == "mixture" else None
-            if predictions is not None:
-                log_priors, state_means, state_covs, _ = predictions
+            if self.prior_model == "mixture":
+                log_priors, state_means, state_covs, _ = self.dgpt.step_predictions_
                 result = mixture_posterior(
                     log_priors,
                     state_means[..., 0],

@@ -61,7 +61,11 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
         for aggregation in ("rbcm", "gpoe")
         for inputs in INPUTS
     ),
-    ("hybrid", "agents.hybrid:HybridFilter", {"variant": "exact"}),
+    (
+        "hybrid",
+        "agents.hybrid:HybridFilter",
+        {"variant": "exact", "silence_particles": SILENCE_PARTICLES},
+    ),
     ("hybrid" + TREND_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "exact", "gp": "se"}),
     ("hybrid" + PAPER_SUFFIX, "agents.hybrid:HybridFilter", {"variant": "paper", "gp": "se"}),
 )

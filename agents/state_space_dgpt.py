@@ -1012,7 +1012,6 @@ class StateSpaceDGPT(TrackerBase):
             self.data_mean_, self.data_cov_ = mean, cov
         return self._predict_next(mean, cov)
 
-
     def set_posterior(self, log_weights, position_means, position_vars):
         """Take the hybrid filter's posterior over this step's predictions
         (``step_predictions_``, one per hypothesis h) in place of the tracker's own: each

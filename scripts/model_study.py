@@ -56,6 +56,10 @@ CANDIDATES = {
     "hybrid-trend": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
     "hybrid-ncv-moments": ("agents.hybrid:HybridFilter", {"gp": "ncv", "prior_model": "moments"}),
+    "hybrid-ncv-silence-1000": (
+        "agents.hybrid:HybridFilter",
+        {"gp": "ncv", "silence_particles": 1000},
+    ),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     "hybrid-ncv-per-sensor": (
         "agents.hybrid:HybridFilter",
@@ -230,13 +234,21 @@ CANDIDATES = {
     **{
         f"ss-rbcm-silence-1000-p{probability:g}": (
             "agents.state_space_dgpt:StateSpaceDGPT",
-            {"aggregation": "rbcm", "silence_particles": 1000, "manoeuvre_probability": probability},
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "manoeuvre_probability": probability,
+            },
         )
         for probability in (0.05, 0.1)
     },
     "ss-rbcm-silence-1000-turn4": (
         "agents.state_space_dgpt:StateSpaceDGPT",
-        {"aggregation": "rbcm", "silence_particles": 1000, "turn_rates": (0.35, -0.35, 0.52, -0.52)},
+        {
+            "aggregation": "rbcm",
+            "silence_particles": 1000,
+            "turn_rates": (0.35, -0.35, 0.52, -0.52),
+        },
     ),
     **{
         f"ss-rbcm-s{stay:g}-q{q:g}": (

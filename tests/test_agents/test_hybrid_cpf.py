@@ -3,9 +3,9 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import median_in_band, mixture_moments, problem_spec, sensed_calibration
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from conftest import median_in_band, mixture_moments, problem_spec, sensed_calibration
 
 from agents.hybrid import (
     GaussianSumPosterior,
@@ -187,9 +187,7 @@ def test_mixture_posterior_equals_grid_integration():
     match a grid integration under the per-sensor model."""
     log_priors = np.log([0.9, 0.1])
     means, variances = np.array([[0.0, 0.0], [3.0, -2.0]]), np.array([[4.0, 2.25], [9.0, 9.0]])
-    result = mixture_posterior(
-        log_priors, means, variances, SCAN, LIKELIHOOD, sensors=SCAN_SENSORS
-    )
+    result = mixture_posterior(log_priors, means, variances, SCAN, LIKELIHOOD, sensors=SCAN_SENSORS)
     likelihood = per_sensor_log_likelihood(GRID, SCAN, SCAN_SENSORS)
     joint = [
         log_prior + gaussian_log_density(GRID, mean, var) + likelihood
@@ -231,13 +229,13 @@ def test_gaussian_sums_of_many_priors_equal_each_prior_alone(seed, n_priors, n_p
     sensors = rng.integers(0, 4, n_points) if per_sensor else None
     batch = gaussian_sums(means, variances, points, LIKELIHOOD, sensors=sensors)
     for prior in range(n_priors):
-        alone = exact_posterior(
-            means[prior], variances[prior], points, LIKELIHOOD, sensors=sensors
-        )
+        alone = exact_posterior(means[prior], variances[prior], points, LIKELIHOOD, sensors=sensors)
         np.testing.assert_allclose(batch.mean[prior], alone.mean, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(batch.var[prior], alone.var, rtol=1e-12)
         np.testing.assert_allclose(batch.log_evidence[prior], alone.log_evidence, rtol=1e-12)
-        np.testing.assert_allclose(batch.pruned_mass[prior], alone.pruned_mass, rtol=1e-9, atol=1e-300)
+        np.testing.assert_allclose(
+            batch.pruned_mass[prior], alone.pruned_mass, rtol=1e-9, atol=1e-300
+        )
         assert batch.n_components[prior] == alone.n_components
 
 
@@ -436,10 +434,37 @@ def test_hybrid_rejects_an_unknown_variant():
         HybridFilter(variant="approximate")
 
 
-def test_hybrid_rejects_silence_particles_in_its_dgpt():
-    with pytest.raises(ValueError, match="silence_particles"):
-        HybridFilter(silence_particles=1000)
-    assert HybridFilter(silence_particles=0).dgpt.silence_particles == 0
+def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles():
+    """The registered hybrid wraps the registered dgpt-rbcm, silence particles included. On
+    a step without measurements inside a track the DGPT's particles carry the gap, and the
+    hybrid's estimate is the DGPT's (their posterior given the silence); on the next step
+    with measurements its Poisson update starts from the DGPT's prediction, which the
+    particles' moments made, and the gap's particles are gone."""
+    hybrid, dgpt = make_tracker("hybrid"), make_tracker("dgpt-rbcm")
+    assert hybrid.dgpt.silence_particles == dgpt.silence_particles > 0
+    assert hybrid.dgpt.aggregation == dgpt.aggregation
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
+    tracker = RecordingHybrid(silence_particles=hybrid.dgpt.silence_particles)
+    tracker.learned_ = []
+    obs, info = env.reset(seed=1000)
+    tracker.reset(info["problem_spec"], seed=1000)
+    gap_steps = reacquisitions = 0
+    in_gap = False
+    for _ in range(150):
+        started = tracker.dgpt.mean_ is not None
+        estimate = tracker.update(obs)
+        if started and not np.any(obs["mask"]):
+            np.testing.assert_array_equal(estimate.mean, tracker.learned_[-1])
+            assert tracker.dgpt.particles_ is not None
+            gap_steps += 1
+            in_gap = True
+        elif in_gap:
+            assert tracker.dgpt.particles_ is None and tracker.dgpt.step_predictions_ is not None
+            assert not np.array_equal(estimate.mean, tracker.learned_[-1])
+            reacquisitions += 1
+            in_gap = False
+        obs, *_ = env.step(estimate.mean)
+    assert gap_steps >= 5 and reacquisitions >= 2
 
 
 class RecordingHybrid(HybridFilter):
@@ -540,7 +565,9 @@ def test_hybrid_estimate_is_the_exact_poisson_posterior_with_lemma_1_bound(
             else:
                 log_priors, means, covs, _ = predictions
                 components = [
-                    exact_posterior(mean[:, 0], cov[:, 0, 0], measurements, likelihood, sensors=sensors)
+                    exact_posterior(
+                        mean[:, 0], cov[:, 0, 0], measurements, likelihood, sensors=sensors
+                    )
                     for mean, cov in zip(means, covs)
                 ]
                 weights = np.exp(log_priors + [c.log_evidence for c in components])
