@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agents import aggregation as agg
 from agents.dgpt import DGPT
 from agents.likelihood import PoissonLikelihood
 from agents.state_space_dgpt import StateSpaceDGPT
@@ -92,7 +93,7 @@ as clutter and settles on clutter near the prior with a standard deviation of ab
 while the DGPT's own update, which weighs its hypotheses by their likelihood, stays with the
 target. The mixture costs one Gaussian sum per prediction (four with the turn modes), built
 in one pass (:func:`gaussian_sums`): the hybrid's step took 1.5-2.2 ms in the 0.14.0 grid,
-against 1.0-1.4 ms with the moments in 0.13.0's."""
+against 1.1-1.4 ms with the moments in 0.13.0's."""
 REACQUIRE_RULES = ("dgpt", "none")
 """What the exact variant does at the first step with measurements after steps without any
 (a coverage gap): ``"dgpt"`` answers with the DGPT's own estimate, ``"none"`` applies the
@@ -238,7 +239,7 @@ def gaussian_sums(
                 axis=-1,
             )
         )
-        skipped = log_ratio < np.log(prune_tolerance)
+        skipped = log_ratio < (np.log(prune_tolerance) if prune_tolerance > 0 else -np.inf)
         if sensors is not None:  # a sensor's target point is among its measurements
             for row in skipped:
                 row &= np.isin(groups, groups[~row])
@@ -345,7 +346,9 @@ class MixturePosterior:
     """The exact posterior under a Gaussian-mixture prior: per prior component h its
     posterior probability (``log_weights`` (H,), normalised) and the moments of its own
     posterior (``means``, ``vars`` (H, 2)); the mixture's moments (``mean``, ``var`` (2,));
-    and the dropped mass, the components' ``pruned_mass`` weighted by their probabilities."""
+    and the dropped mass, the components' ``pruned_mass`` weighted by their probabilities
+    (an estimate of the mixture's: the weights come from evidences less their pruned
+    shares, so it is not a bound)."""
 
     log_weights: np.ndarray
     means: np.ndarray
@@ -409,11 +412,15 @@ class HybridFilter(TrackerBase):
     (eq. (42)), with the closed form of eqs. (50)-(51) (``variant="paper"``) or the exact
     posterior (``variant="exact"``). The posterior is the estimate, and it is fed back to
     the DGPT as its estimate of the step (the spatial input of STGP; with ``gp="ncv"``, the
-    state the tracker broadcasts and predicts from). The first step, which has no prior,
-    and a step on which the state-space DGPT made no prediction (a coverage gap carried by
-    its silence particles, ``silence_particles`` > 0, as in the registered ``hybrid``)
-    return the DGPT's estimate. The bound is Lemma 1 on the posterior,
-    (2 log(1 / delta))^(1/2) sigma_t.
+    state the tracker broadcasts and predicts from). The first step of a track (the
+    episode's first, or, with clutter at every sensor, one the state-space DGPT restarts
+    from the step's points), which has no prediction to update, and a step on which the
+    state-space DGPT made no prediction (a coverage gap carried by its silence particles,
+    ``silence_particles`` > 0, as in the registered ``hybrid``) return the DGPT's estimate.
+    The bound is Lemma 1 on the posterior, (2 log(1 / delta))^(1/2) sigma_t; with the
+    mixture prior, the bound of the posterior's mixture over the prior's components
+    (:func:`agents.aggregation.mixture_half_width`: Lemma 1 on each component with its
+    share of delta), since the mixture's moments are not a Gaussian's.
 
     Args:
         variant: ``"exact"`` or ``"paper"``.
@@ -522,11 +529,13 @@ class HybridFilter(TrackerBase):
         self.silent_steps_ = 0 if measurements.shape[0] else self.silent_steps_ + 1
         if prior is None:
             return learned
-        if self.gp == "ncv" and self.dgpt.step_predictions_ is None:
+        if self.gp == "ncv" and (self.dgpt.step_predictions_ is None or self.dgpt.new_track_):
             # No prediction to update: the DGPT's particles carry a coverage gap
             # (silence_particles > 0) and its estimate is their posterior given the sensors'
             # silence (with clutter at every sensor, given every scan, none of which its
-            # screen admitted), or, before a track, the scans' posterior.
+            # screen admitted), or, before a track, the scans' posterior; or the DGPT has
+            # just started a track from this step's points (with clutter at every sensor,
+            # after its screen dropped the old one), which the last prediction does not hold.
             return learned
         if reacquiring and self.variant == "exact" and self.reacquire == "dgpt":
             # After a gap the prior is an extrapolation that may lie tens of metres off, and
@@ -552,6 +561,12 @@ class HybridFilter(TrackerBase):
                     sensors=sensors,
                 )
                 prior_next = self.dgpt.set_posterior(result.log_weights, result.means, result.vars)
+                bound = agg.mixture_half_width(
+                    np.exp(result.log_weights),
+                    result.means - result.mean,
+                    np.sqrt(result.vars),
+                    self.delta,
+                )
             else:
                 result = exact_posterior(
                     prior[0],
@@ -564,5 +579,6 @@ class HybridFilter(TrackerBase):
                 prior_next = self.dgpt.set_estimate(result.mean, result.var)
             mean, var = result.mean, result.var
             self.pruned_mass_ = max(self.pruned_mass_, result.pruned_mass)
-        bound = np.sqrt(2.0 * np.log(1.0 / self.delta) * var)
+        if self.prior_model == "moments":
+            bound = np.sqrt(2.0 * np.log(1.0 / self.delta) * var)
         return Estimate(mean, var, bound, prior_next)

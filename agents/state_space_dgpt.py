@@ -427,8 +427,10 @@ class StateSpaceDGPT(TrackerBase):
         self.prior_state_ = None  # the same, made at the last step for this one
         self.next_modes_ = self.prior_modes_ = None  # with turn modes: the same per mode
         # the last step's predictions, one per hypothesis, for the hybrid filter: log prior
-        # probabilities (H,), means (H, 2, 2), covs (H, 2, 2, 2), modes (H,) or None
+        # probabilities (H,), means (H, 2, 2), covs (H, 2, 2, 2), modes (H,) or None; and
+        # whether the last step started a track
         self.step_predictions_ = None
+        self.new_track_ = False
         self.fits_ = 0
         self.fits_at_bound_ = 0
         self._start_track()
@@ -516,6 +518,7 @@ class StateSpaceDGPT(TrackerBase):
         self.prior_state_ = self.next_state_
         self.prior_modes_ = self.next_modes_
         self.step_predictions_ = None
+        self.new_track_ = False
         mask = np.asarray(obs["mask"]).astype(bool)
         points = np.asarray(obs["measurements"], dtype=float)[mask]
         sensors = np.asarray(obs["sensor"])[mask]
@@ -540,6 +543,7 @@ class StateSpaceDGPT(TrackerBase):
             if not points.shape[0]:
                 self.last_estimate_ = Estimate.uninformed(spec)
                 return None
+            self.new_track_ = True  # this step starts a track (the first, or after a restart)
             self.mean_ = np.column_stack([np.median(points, axis=0), np.zeros(2)])
             self.cov_ = np.zeros((2, 2, 2))
             self.cov_[:, 0, 0] = spec.sensing_range**2
@@ -1000,17 +1004,13 @@ class StateSpaceDGPT(TrackerBase):
         if self.prior_state_ is None:
             raise RuntimeError("set_estimate needs a prior: call it after an update that had one")
         mean, cov = condition_on_position(*self.prior_state_, estimate, var)
-        self.mean_, self.cov_ = mean, cov
-        self.error_excess_ = None  # the hybrid's posterior is taken as exact
         if self.turn_rates:
             shape = self.prior_modes_[0].shape[:-1]  # (modes, axes)
             mode_means, mode_covs = condition_on_position(
                 *self.prior_modes_, np.broadcast_to(estimate, shape), np.broadcast_to(var, shape)
             )
             self.modes_ = (mode_means, mode_covs, self.modes_[2])
-        if self.data_mean_ is not None and self.data_step_ == self.last_step_:
-            self.data_mean_, self.data_cov_ = mean, cov
-        return self._predict_next(mean, cov)
+        return self._take_posterior(mean, cov)
 
     def set_posterior(self, log_weights, position_means, position_vars):
         """Take the hybrid filter's posterior over this step's predictions
@@ -1027,10 +1027,15 @@ class StateSpaceDGPT(TrackerBase):
         _, prior_means, prior_covs, modes = self.step_predictions_
         means, covs = condition_on_position(prior_means, prior_covs, position_means, position_vars)
         means, covs = np.swapaxes(means, 0, 1), np.swapaxes(covs, 0, 1)  # (axis, H, ...)
-        mean, cov = reduce_mixture(log_weights, means, covs)
-        self.mean_, self.cov_ = mean, cov
-        self.error_excess_ = None  # the hybrid's posterior is taken as exact
         self.modes_ = self._mode_posteriors(modes, log_weights, means, covs)
+        return self._take_posterior(*reduce_mixture(log_weights, means, covs))
+
+    def _take_posterior(self, mean, cov) -> tuple[np.ndarray, np.ndarray]:
+        """Broadcast the hybrid's posterior state ``mean`` (2, 2), ``cov`` (2, 2, 2), taken as
+        exact (no error excess), also as the learning window's prior for the next step with
+        data when this step had data; returns the next-step prediction."""
+        self.mean_, self.cov_ = mean, cov
+        self.error_excess_ = None
         if self.data_mean_ is not None and self.data_step_ == self.last_step_:
             self.data_mean_, self.data_cov_ = mean, cov
         return self._predict_next(mean, cov)
