@@ -141,13 +141,14 @@ class GaussianSumPosterior:
     mixture (relative weight of the dropped components). ``log_evidence`` is the log of the
     prior's integral against the likelihood, int N(x; mu, diag(P)) prod_j (c + lambda_T
     N(z_j; x, sigma_z^2 I)) dx (per-sensor model: its factors), less the pruned
-    components' share: what weighs one prior against another (:func:`mixture_posterior`)."""
+    components' share: what weighs one prior against another (:func:`mixture_posterior`).
+    From :func:`gaussian_sums` every field has a leading axis, one entry per prior."""
 
     mean: np.ndarray
     var: np.ndarray
-    n_components: int
-    pruned_mass: float
-    log_evidence: float = 0.0
+    n_components: int | np.ndarray
+    pruned_mass: float | np.ndarray
+    log_evidence: float | np.ndarray = 0.0
 
 
 def exact_posterior(
@@ -215,6 +216,9 @@ def gaussian_sums(
     noise_var = likelihood.noise_std**2
     log_clutter = np.log(likelihood.clutter_density) if likelihood.clutter_rate > 0 else -np.inf
     log_rate = np.log(likelihood.detection_rate)
+    prior_means = np.asarray(prior_means, dtype=float)
+    prior_vars = np.asarray(prior_vars, dtype=float)
+    measurements = np.asarray(measurements, dtype=float)
     count = prior_means.shape[0]
     means, variances = prior_means.copy(), prior_vars.copy()
     owner = np.arange(count)  # each component's prior

@@ -564,10 +564,11 @@ class StateSpaceDGPT(TrackerBase):
             np.stack([prediction[1] for prediction, _ in predictions]),
             modes,
         )
+        log_priors, prior_means, prior_covs, _ = self.step_predictions_
         if not points.shape[0]:
-            log_weights = np.log([probability for _, probability in predictions])
-            means = np.stack([prediction[0] for prediction, _ in predictions], axis=-2)
-            covs = np.stack([prediction[1] for prediction, _ in predictions], axis=-3)
+            log_weights = log_priors
+            means = np.swapaxes(prior_means, 0, 1)  # (axis, H, 2)
+            covs = np.swapaxes(prior_covs, 0, 1)
             mean, cov = reduce_mixture(log_weights, means, covs)
             prior_var = covs[..., 0, 0]  # (axis, H)
             var = None
@@ -581,7 +582,7 @@ class StateSpaceDGPT(TrackerBase):
                     self.error_excess_ = None
             ucb = agg.mixture_half_width(
                 np.exp(log_weights),
-                np.stack([prior_mean[:, 0] - mean[:, 0] for (prior_mean, _), _ in predictions]),
+                prior_means[..., 0] - mean[:, 0],
                 np.sqrt(prior_var.T),
                 self.delta,
             )
@@ -589,13 +590,12 @@ class StateSpaceDGPT(TrackerBase):
                 step, mean, cov, ucb, self._mode_posteriors(modes, log_weights, means, covs), var
             )
             return None
-        prior_covs = np.stack([prediction[1] for prediction, _ in predictions])
         hypotheses = self._hypotheses(
             points,
             sensors,
-            np.stack([prediction[0] for prediction, _ in predictions]),
+            prior_means,
             prior_covs,
-            np.log([probability for _, probability in predictions]),
+            log_priors,
             self._error_prior_covs(prior_covs, dt),
         )
         log_weights = hypotheses["log_weight"]
