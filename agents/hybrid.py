@@ -438,7 +438,8 @@ class HybridFilter(TrackerBase):
             (42) is used.
         prior_model: the exact variant's prior around ``gp="ncv"`` (:data:`PRIOR_MODELS`);
             None: ``"mixture"`` there, ``"moments"`` otherwise (the only choice).
-        **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window, ...).
+        **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window,
+            silence_particles, ...).
     """
 
     name = "hybrid"
