@@ -517,6 +517,21 @@ def test_hybrid_rejects_an_unknown_variant():
         HybridFilter(variant="approximate")
 
 
+def predictions_posterior(dgpt, obs, likelihood):
+    """The per-sensor Poisson posterior of the state-space DGPT's last step's predictions
+    (``step_predictions_``) given that step's observation ``obs``."""
+    log_priors, means, covs, _ = dgpt.step_predictions_
+    mask = obs["mask"].astype(bool)
+    return mixture_posterior(
+        log_priors,
+        means[..., 0],
+        covs[..., 0, 0],
+        obs["measurements"][mask],
+        likelihood,
+        sensors=obs["sensor"][mask],
+    )
+
+
 def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles():
     """The registered hybrid wraps the registered dgpt-rbcm, silence particles included. On
     a step without measurements inside a track the DGPT's particles carry the gap, and the
@@ -545,20 +560,12 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles():
             in_gap = True
         elif in_gap:
             assert tracker.dgpt.particles_ is None
-            log_priors, means, covs, _ = tracker.dgpt.step_predictions_
+            log_priors, means, _, _ = tracker.dgpt.step_predictions_
             weights = np.exp(log_priors - np.logaddexp.reduce(log_priors))
             # the step's predictions are the one made from the particles, split into its
             # process-noise components and modes: the same mean
             np.testing.assert_allclose(weights @ means[:, :, 0], prediction[0], rtol=1e-9)
-            mask = obs["mask"].astype(bool)
-            expected = mixture_posterior(
-                log_priors,
-                means[..., 0],
-                covs[..., 0, 0],
-                obs["measurements"][mask],
-                likelihood,
-                sensors=obs["sensor"][mask],
-            )
+            expected = predictions_posterior(tracker.dgpt, obs, likelihood)
             np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
             reacquisitions += 1
             in_gap = False
@@ -861,16 +868,8 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior(prio
                     for mode in range(count)
                 ]
             else:
-                log_priors, means, covs, modes = dgpt.step_predictions_
-                mask = obs["mask"].astype(bool)
-                posterior = mixture_posterior(
-                    log_priors,
-                    means[..., 0],
-                    covs[..., 0, 0],
-                    obs["measurements"][mask],
-                    likelihood,
-                    sensors=obs["sensor"][mask],
-                )
+                _, means, covs, modes = dgpt.step_predictions_
+                posterior = predictions_posterior(dgpt, obs, likelihood)
                 np.testing.assert_allclose(estimate.mean, posterior.mean, rtol=1e-12)
                 states = condition_on_position(means, covs, posterior.means, posterior.vars)
                 axes = [
