@@ -20,7 +20,13 @@ from __future__ import annotations
 import numpy as np
 from scipy import spatial
 
-__all__ = ["draw_particles", "propagate_particles", "silent_region", "particle_moments"]
+__all__ = [
+    "draw_particles",
+    "propagate_particles",
+    "silent_region",
+    "reporting_region",
+    "particle_moments",
+]
 
 
 def draw_particles(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Generator):
@@ -91,6 +97,24 @@ def silent_region(
         positions, k=1, distance_upper_bound=sensing_range
     )
     return inside & (distance > sensing_range)
+
+
+def reporting_region(
+    positions: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+) -> np.ndarray:
+    """(N,) True where a position (N, 2) lies within ``sensing_range`` of every sensor of
+    ``reporting_positions`` (k, 2) and where :func:`silent_region` holds for
+    ``silent_positions``: where a target can be when exactly the first sensors report, with
+    clutter only at sensors that sense the target."""
+    inside = silent_region(positions, silent_positions, sensing_range, area)
+    if len(reporting_positions) == 0:
+        return inside
+    offsets = positions[:, None, :] - np.asarray(reporting_positions)[None, :, :]
+    return inside & np.all(np.einsum("nki,nki->nk", offsets, offsets) <= sensing_range**2, axis=1)
 
 
 def particle_moments(states: np.ndarray, weights: np.ndarray):

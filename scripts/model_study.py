@@ -60,6 +60,22 @@ CANDIDATES = {
         "agents.hybrid:HybridFilter",
         {"gp": "ncv", "silence_particles": 1000},
     ),
+    **{
+        f"hybrid-ncv-silence-1000-reports-{probability:g}": (
+            "agents.hybrid:HybridFilter",
+            {
+                "gp": "ncv",
+                "silence_particles": 1000,
+                "gap_end": "reports",
+                "gap_restart_probability": probability,
+            },
+        )
+        for probability in (0.02, 0.1)
+    },
+    "hybrid-ncv-silence-1000-moments": (
+        "agents.hybrid:HybridFilter",
+        {"gp": "ncv", "silence_particles": 1000, "gap_end": "moments"},
+    ),
     "hybrid-ncv-reacquire-none": ("agents.hybrid:HybridFilter", {"gp": "ncv", "reacquire": "none"}),
     "hybrid-ncv-per-sensor": (
         "agents.hybrid:HybridFilter",
@@ -242,6 +258,22 @@ CANDIDATES = {
         )
         for probability in (0.05, 0.1)
     },
+    **{
+        f"ss-rbcm-silence-1000-reports-{probability:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "gap_end": "reports",
+                "gap_restart_probability": probability,
+            },
+        )
+        for probability in (0.0, 0.02, 0.1, 0.3, 0.6)
+    },
+    "ss-rbcm-silence-1000-moments": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", "silence_particles": 1000, "gap_end": "moments"},
+    ),
     "ss-rbcm-silence-1000-turn4": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {
@@ -304,7 +336,11 @@ variance; ``ss-rbcm-p<p>`` is the default with manoeuvre probability p, and
 settings, ``ss-rbcm-boundary-avoiding`` climbs q with the boundary-avoiding prior
 (:data:`~agents.state_space_dgpt.PROCESS_NOISE_PRIORS`), and ``ss-rbcm-silence-1000`` (with
 ``-ba``: and that prior) conditions on the silence of the sensors in coverage gaps with 1000
-particles: it is ``dgpt-rbcm`` since 0.12.0. Results
+particles: it is ``dgpt-rbcm`` since 0.12.0; ``-moments`` is 0.12.0-0.14.0's ``dgpt-rbcm``,
+whose prior after a gap is the particles' moments predicted, and ``-reports-<p>`` conditions
+that prior on which sensors report, with a new track of prior probability p
+(:data:`~agents.state_space_dgpt.GAP_ENDS`; ``hybrid-ncv-silence-1000-*`` the same inside
+the hybrid). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (

@@ -532,21 +532,27 @@ def predictions_posterior(dgpt, obs, likelihood):
     )
 
 
-def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles():
+@pytest.mark.parametrize("gap_end", ["moments", "reports"])
+def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
     """The registered hybrid wraps the registered dgpt-rbcm, silence particles included. On
     a step without measurements inside a track the DGPT's particles carry the gap, and the
     hybrid's estimate is the DGPT's (their posterior given the silence); on the next step
-    with measurements its Poisson update starts from the DGPT's prediction, which the
-    particles' moments made, and the gap's particles are gone."""
+    with measurements its Poisson update starts from the DGPT's predictions, and the gap's
+    particles are gone. With gap_end="moments" those predictions are the one the particles'
+    moments made at the gap's last step; with "reports" (the default) they are the particles
+    carried to the step, each mode's in the disc of every reporting sensor, and the new
+    track in that region with its prior probability."""
     hybrid, dgpt = make_tracker("hybrid"), make_tracker("dgpt-rbcm")
     assert hybrid.dgpt.silence_particles == dgpt.silence_particles > 0
     assert hybrid.dgpt.aggregation == dgpt.aggregation
+    assert hybrid.dgpt.gap_end == dgpt.gap_end == "reports"
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
-    tracker = RecordingHybrid(silence_particles=hybrid.dgpt.silence_particles)
+    tracker = RecordingHybrid(silence_particles=hybrid.dgpt.silence_particles, gap_end=gap_end)
     tracker.learned_ = []
     obs, info = env.reset(seed=1000)
-    tracker.reset(info["problem_spec"], seed=1000)
-    likelihood = PoissonLikelihood.from_spec(info["problem_spec"])
+    spec = info["problem_spec"]
+    tracker.reset(spec, seed=1000)
+    likelihood = PoissonLikelihood.from_spec(spec)
     gap_steps = reacquisitions = 0
     in_gap = False
     for _ in range(150):
@@ -562,9 +568,17 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles():
             assert tracker.dgpt.particles_ is None
             log_priors, means, _, _ = tracker.dgpt.step_predictions_
             weights = np.exp(log_priors - np.logaddexp.reduce(log_priors))
-            # the step's predictions are the one made from the particles, split into its
-            # process-noise components and modes: the same mean
-            np.testing.assert_allclose(weights @ means[:, :, 0], prediction[0], rtol=1e-9)
+            if gap_end == "moments":
+                # the prediction made from the particles, split into its process-noise
+                # components and modes: the same mean
+                np.testing.assert_allclose(weights @ means[:, :, 0], prediction[0], rtol=1e-9)
+            else:
+                reporting = np.asarray(spec.sensor_positions)[
+                    np.unique(obs["sensor"][obs["mask"] > 0])
+                ]
+                distances = np.linalg.norm(means[:, None, :, 0] - reporting[None], axis=-1)
+                assert np.all(distances <= spec.sensing_range)  # the discs' intersection is convex
+                assert weights[-1] == pytest.approx(0.1, rel=1e-12)
             expected = predictions_posterior(tracker.dgpt, obs, likelihood)
             np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
             reacquisitions += 1

@@ -11,9 +11,15 @@ from hypothesis import strategies as st
 import dgpt_gym  # noqa: F401  (registers the environment)
 from agents.particles import kernel_scale, resample_systematic
 from agents.registration import SILENCE_PARTICLES
-from agents.silence import draw_particles, particle_moments, propagate_particles, silent_region
+from agents.silence import (
+    draw_particles,
+    particle_moments,
+    propagate_particles,
+    reporting_region,
+    silent_region,
+)
 from agents.state_space import ncv_predict, turn_predict
-from agents.state_space_dgpt import StateSpaceDGPT
+from agents.state_space_dgpt import GAP_RESTART_PROBABILITY, INITIAL_SPEED_STD, StateSpaceDGPT
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
 
 
@@ -117,6 +123,88 @@ def test_silent_region_by_hand():
     np.testing.assert_array_equal(
         silent_region(points, np.empty((0, 2)), 50.0, 1000.0),
         [True, True, True, True, False, False],
+    )
+
+
+def test_reporting_region_by_hand():
+    """In the disc of every reporting sensor (A, B), in no silent one's (C), in the area."""
+    reporting = np.array([[100.0, 100.0], [160.0, 100.0]])
+    silent = np.array([[130.0, 160.0]])
+    points = np.array(
+        [
+            [130.0, 100.0],  # 30 m from A and B, 60 m from C
+            [100.0, 100.0],  # at A, 60 m from B
+            [130.0, 120.0],  # 36 m from A and B, 40 m from C
+            [130.0, 60.0],  # 50 m from A and B: on both discs' edge
+        ]
+    )
+    np.testing.assert_array_equal(
+        reporting_region(points, reporting, silent, 50.0, 1000.0), [True, False, False, True]
+    )
+    # an area whose edge is at x = 129 m leaves them out
+    np.testing.assert_array_equal(
+        reporting_region(points, reporting, silent, 50.0, 129.0), [False] * 4
+    )
+    # no reporting sensor: the silent region
+    np.testing.assert_array_equal(
+        reporting_region(points, np.empty((0, 2)), silent, 50.0, 1000.0),
+        silent_region(points, silent, 50.0, 1000.0),
+    )
+
+
+def gap_end_predictions(reporting_sensor, point, gap_end="reports"):
+    """A target reported by sensor 0 at (500, 500) while it moves east at 10 m/s (steps
+    0-4), silent at steps 5-6, then reported at ``point`` by ``reporting_sensor``: sensor 1
+    at (575, 590), north of the particles' path and out of sensor 0's disc, or sensor 2 at
+    (200, 200), which no particle can reach. Returns the spec and the step's predictions."""
+    spec = problem_spec(
+        sensor_positions=((500.0, 500.0), (575.0, 590.0), (200.0, 200.0)), n_steps=20
+    )
+    tracker = StateSpaceDGPT(silence_particles=1000, gap_end=gap_end)
+    tracker.reset(spec, seed=5)
+    for t in range(5):
+        tracker.update(measurement_obs(t, [[505.0 + 10.0 * t, 500.0]], [0]))
+    for t in (5, 6):
+        tracker.update(measurement_obs(t, np.empty((0, 2)), []))
+    tracker.update(measurement_obs(7, [point], [reporting_sensor]))
+    return spec, tracker.step_predictions_
+
+
+def test_at_a_gaps_end_the_predictions_lie_where_the_reports_say():
+    """With gap_end="reports" each mode's prediction is its particles' moments in the
+    reporting sensor's disc, and the last is a new track uniform in that disc (sensor 0's
+    does not overlap it): position mean the sensor's, variance R^2 / 4 per axis, velocity
+    variance INITIAL_SPEED_STD^2, prior probability GAP_RESTART_PROBABILITY. Tolerances:
+    five standard errors of 1000 uniform draws, R / (2 sqrt(n)) for the mean and
+    R^2 / (4 sqrt(n)) for the variance (the fourth moment of a coordinate uniform in a disc
+    is R^4 / 8). With "moments" the predictions stay on the particles' eastward path, most
+    of it outside the disc."""
+    spec, (log_priors, means, covs, modes) = gap_end_predictions(1, (572.0, 560.0))
+    sensor = np.asarray(spec.sensor_positions[1])
+    radius, n = spec.sensing_range, 1000
+    weights = np.exp(log_priors - np.logaddexp.reduce(log_priors))
+    assert weights[-1] == pytest.approx(GAP_RESTART_PROBABILITY, rel=1e-12)
+    np.testing.assert_array_equal(modes, [0, 1, 2, 0])
+    assert np.all(np.linalg.norm(means[:-1, :, 0] - sensor, axis=1) <= radius)
+    np.testing.assert_array_less(np.abs(means[-1, :, 0] - sensor), 5 * radius / (2 * np.sqrt(n)))
+    np.testing.assert_array_less(
+        np.abs(covs[-1, :, 0, 0] - radius**2 / 4), 5 * radius**2 / (4 * np.sqrt(n))
+    )
+    np.testing.assert_array_equal(means[-1, :, 1], 0.0)
+    np.testing.assert_array_equal(covs[-1, :, 1, 1], INITIAL_SPEED_STD**2)
+    _, (_, moment_means, _, _) = gap_end_predictions(1, (572.0, 560.0), gap_end="moments")
+    assert np.all(np.linalg.norm(moment_means[:, :, 0] - sensor, axis=1) > radius)
+
+
+def test_at_a_gaps_end_no_particle_where_the_reports_say_starts_a_new_track():
+    """A report where no particle is: every mode's prediction is the new track in the
+    reporting disc, with equal probabilities."""
+    spec, (log_priors, means, covs, modes) = gap_end_predictions(2, (210.0, 190.0))
+    np.testing.assert_allclose(np.exp(log_priors), 1.0 / 3.0, rtol=1e-12)
+    np.testing.assert_array_equal(modes, [0, 1, 2])
+    np.testing.assert_array_equal(means, np.broadcast_to(means[0], means.shape))
+    np.testing.assert_array_less(
+        np.abs(means[0, :, 0] - spec.sensor_positions[2]), 5 * 50.0 / (2 * np.sqrt(1000))
     )
 
 
