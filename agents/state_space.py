@@ -28,6 +28,7 @@ covariances (..., 2, 2), with the position first.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -92,13 +93,22 @@ def turn_predict(mean: np.ndarray, cov: np.ndarray, dt: float, q, omega: float):
     other step stays per axis (their size relative to the blocks is about |omega dt| / 2
     for equal axis variances; omega = 0 gives :func:`ncv_predict` exactly)."""
     q = np.broadcast_to(np.asarray(q, dtype=float), np.shape(mean)[:-1])
-    transition = turn_transition(omega, dt).reshape(2, 2, 2, 2)  # (axis, entry, axis, entry)
+    transition, noise = _turn_matrices(float(omega), float(dt))
     new_mean = np.einsum("aibj,...bj->...ai", transition, mean)
     # the joint covariance is block diagonal over the axes: F P F^T = sum_b F_ab P_b F_cb^T
     blocks = np.einsum("aibj,...bjk,albk->...ail", transition, cov, transition)
-    noise = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
     new_cov = blocks + q[..., None, None] * noise
     return new_mean, new_cov
+
+
+@functools.lru_cache(maxsize=64)
+def _turn_matrices(omega: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`turn_predict`'s transition as (axis, entry, axis, entry) and the NCV noise
+    shape of one axis, read-only: a tracker asks for the same few (omega, dt) every step."""
+    transition = turn_transition(omega, dt).reshape(2, 2, 2, 2)
+    noise = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+    transition.flags.writeable = noise.flags.writeable = False
+    return transition, noise
 
 
 def _kalman_update(mean, cov, summary, noise_var):

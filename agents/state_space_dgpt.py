@@ -515,6 +515,7 @@ class StateSpaceDGPT(TrackerBase):
         self.error_excess_: np.ndarray | None = None
         self.modes_ = None  # with turn modes: (means (K, 2, 2), covs (K, 2, 2, 2), probs (K,))
         self.mixed_ = None  # (modes_, their IMM mixing: means, covs, predicted probabilities)
+        self.turn_predictions_ = None  # (mixed_, dt, each turn mode's prediction from it)
 
     def diagnostics(self) -> dict[str, float]:
         """``share_at_bound``: the share of this episode's learning steps that left q on a
@@ -1088,10 +1089,16 @@ class StateSpaceDGPT(TrackerBase):
             for intensity, probability in process_noise_components(q, manoeuvre)
         ]
         modes = [0] * len(predictions)
-        for mode, omega in enumerate(self.turn_rates, start=1):
-            prediction = turn_predict(
-                mixed_means[mode], mixed_covs[mode], dt, self.turn_process_noise, omega
-            )
+        # the turn modes' predictions do not depend on q: the next-step prediction and the
+        # next step share them when that step follows at once
+        cached = self.turn_predictions_
+        if cached is None or cached[0] is not self.mixed_ or cached[1] != dt:
+            turns = [
+                turn_predict(mixed_means[mode], mixed_covs[mode], dt, self.turn_process_noise, omega)
+                for mode, omega in enumerate(self.turn_rates, start=1)
+            ]
+            self.turn_predictions_ = cached = (self.mixed_, dt, turns)
+        for mode, prediction in enumerate(cached[2], start=1):
             predictions.append((prediction, predicted[mode]))
             modes.append(mode)
         return predictions, np.array(modes)
