@@ -110,11 +110,16 @@ def reporting_region(
     ``reporting_positions`` (k, 2) and where :func:`silent_region` holds for
     ``silent_positions``: where a target can be when exactly the first sensors report, with
     clutter only at sensors that sense the target."""
-    inside = silent_region(positions, silent_positions, sensing_range, area)
     if len(reporting_positions) == 0:
-        return inside
-    offsets = positions[:, None, :] - np.asarray(reporting_positions)[None, :, :]
-    return inside & np.all(np.einsum("nki,nki->nk", offsets, offsets) <= sensing_range**2, axis=1)
+        return silent_region(positions, silent_positions, sensing_range, area)
+    reporting_positions = np.asarray(reporting_positions, dtype=float)
+    offsets = positions[:, None, :] - reporting_positions[None, :, :]
+    inside = np.all(np.einsum("nki,nki->nk", offsets, offsets) <= sensing_range**2, axis=1)
+    # a silent disc meets the first reporting one only if its sensor is within 2 R of it
+    silent = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
+    near = np.sum((silent - reporting_positions[0]) ** 2, axis=1) <= (2 * sensing_range) ** 2
+    inside[inside] = silent_region(positions[inside], silent[near], sensing_range, area)
+    return inside
 
 
 def particle_moments(states: np.ndarray, weights: np.ndarray):
