@@ -26,9 +26,10 @@ Two updates, per step:
   prior is its prediction as it is, a Gaussian mixture over its IMM modes and process-noise
   components, each updated exactly and weighted by its evidence (:func:`mixture_posterior`,
   :data:`PRIOR_MODELS`); in a coverage gap that the DGPT's silence particles carry, the
-  estimate is the DGPT's, and at the gap's end the prior is the DGPT's predictions there:
-  its particles where the reports put the target, and a new track
-  (:data:`agents.state_space_dgpt.GAP_ENDS`).
+  estimate is the DGPT's, and at the gap's end the mixture prior is the DGPT's predictions
+  there: its particles where the reports put the target, and a new track
+  (:data:`agents.state_space_dgpt.GAP_ENDS`; ``prior_model="moments"`` takes the
+  prediction made at the gap's last step).
 """
 
 from __future__ import annotations

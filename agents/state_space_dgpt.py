@@ -124,7 +124,6 @@ from agents.state_space import (
     turn_predict,
 )
 from baselines.kalman import imm_mix, reduce_mixture
-from dgpt_gym.measurements import uniform_in_discs
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
 from dgpt_gym.validation import check_bool, check_choice, check_integer, check_real
@@ -246,6 +245,9 @@ one's (:func:`agents.silence.reporting_region`). Each mode's prediction is the m
 its particles there; one more prediction, with prior probability
 :data:`GAP_RESTART_PROBABILITY`, is a new track anywhere in that region, for a target that
 turned where the particles did not follow (and the only one when no particle is there).
+That share is a fixed prior, not the posterior given the reports, which would weigh the
+particles by their mass in the region: a robust prior against a gap model that misses
+turns, and chosen as such below.
 
 Why: on S1's reference path at clutter 5, 3-sigma coverage on detected steps was 98.1 %,
 and its misses were the first three steps after a gap (15 %, 10 % and 6 % of their axes
@@ -765,9 +767,11 @@ class StateSpaceDGPT(TrackerBase):
         :data:`GAP_ENDS`), as :meth:`_predictions` returns them: the gap's particles carried
         to ``step`` and weighed by whether they lie in the disc of every sensor of
         ``sensors`` (those reporting) and of no other awake sensor
-        (:func:`agents.silence.reporting_region`); one prediction per mode, the moments of
-        its particles' kernel density, with the mode's probability. None when no particle
-        lies there."""
+        (:func:`agents.silence.reporting_region`): one prediction per mode, the moments of
+        its particles' kernel density there, with the mode's probability times
+        1 - ``gap_restart_probability``, and a new track in that region
+        (:meth:`_region_prediction`) with ``gap_restart_probability``. When no particle
+        lies there, every mode's prediction is the new track, with equal probabilities."""
         spec = self.spec_
         states, weights, modes, kernel_cov = self._advance_particles(step)
         positions = np.asarray(spec.sensor_positions)
@@ -797,24 +801,28 @@ class StateSpaceDGPT(TrackerBase):
 
     def _region_prediction(self, reporting_positions, silent_positions):
         """A new track's state in the region where the target is when exactly these sensors
-        report (:func:`agents.silence.reporting_region`): the moments of a uniform
-        position there (drawn in the first reporting sensor's disc) and the velocity prior of
-        a new track."""
+        report (:func:`agents.silence.reporting_region`): the moments of a uniform position
+        there, from ``silence_particles`` draws in the box that bounds the reporting discs'
+        intersection within the area (the box's draws stand for the region if none falls in
+        it), with a position variance of at least sigma_n^2 per axis, and the velocity prior
+        of a new track. The floor: two discs that barely meet leave a region a metre wide,
+        whose few draws can give a variance of 0, and RBCM's and GPoE's expert weights
+        (eq. (11)) are 0 on a prior of variance 0."""
         spec = self.spec_
-        positions = uniform_in_discs(
-            self.rng_,
-            np.broadcast_to(reporting_positions[0], (self.silence_particles, 2)),
-            spec.sensing_range,
-        )
+        radius = spec.sensing_range
+        reporting_positions = np.asarray(reporting_positions, dtype=float)
+        low = np.maximum(np.max(reporting_positions, axis=0) - radius, 0.0)
+        high = np.minimum(np.min(reporting_positions, axis=0) + radius, spec.area)
+        positions = self.rng_.uniform(low, high, size=(self.silence_particles, 2))
         inside = reporting_region(
-            positions, reporting_positions, silent_positions, spec.sensing_range, spec.area
+            positions, reporting_positions, silent_positions, radius, spec.area
         )
         if inside.any():
             positions = positions[inside]
         mean = np.zeros((2, 2))
         mean[:, 0] = positions.mean(axis=0)
         cov = np.zeros((2, 2, 2))
-        cov[:, 0, 0] = positions.var(axis=0)
+        cov[:, 0, 0] = np.maximum(positions.var(axis=0), self.noise_var_)
         cov[:, 1, 1] = INITIAL_SPEED_STD**2
         return mean, cov
 
@@ -1094,7 +1102,9 @@ class StateSpaceDGPT(TrackerBase):
         cached = self.turn_predictions_
         if cached is None or cached[0] is not self.mixed_ or cached[1] != dt:
             turns = [
-                turn_predict(mixed_means[mode], mixed_covs[mode], dt, self.turn_process_noise, omega)
+                turn_predict(
+                    mixed_means[mode], mixed_covs[mode], dt, self.turn_process_noise, omega
+                )
                 for mode, omega in enumerate(self.turn_rates, start=1)
             ]
             self.turn_predictions_ = cached = (self.mixed_, dt, turns)

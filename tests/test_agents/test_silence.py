@@ -208,6 +208,35 @@ def test_at_a_gaps_end_no_particle_where_the_reports_say_starts_a_new_track():
     )
 
 
+def test_a_new_track_in_a_sliver_of_a_region_keeps_a_variance():
+    """Two reporting discs whose centres are 99 m apart (R = 50 m) meet in a lens about 1 m
+    wide and 14 m high. The new track's prediction is drawn in the box bounding the
+    intersection (1 m by 100 m), and about 94 of the 1000 land in the lens (9.4 m^2): its
+    mean is at the lens's centre, its y variance is the lens's (h^2 / 5 for the parabolic
+    profile of a lens of half-height h = 7.05 m; within 45 %, four relative standard errors
+    of 94 draws, sqrt((E y^4 / sigma^4 - 1) / 94) = 0.11 with E y^4 / sigma^4 = 75 / 35),
+    and its x variance, about 0.08 m^2, is floored at sigma_n^2 = 1, so that RBCM's
+    weights stay finite."""
+    spec = problem_spec(sensor_positions=((300.0, 300.0), (399.0, 300.0)))
+    tracker = StateSpaceDGPT(aggregation="rbcm", silence_particles=1000)
+    tracker.reset(spec, seed=0)
+    mean, cov = tracker._region_prediction(np.asarray(spec.sensor_positions), np.empty((0, 2)))
+    np.testing.assert_allclose(mean[:, 0], [349.5, 300.0], atol=0.5)
+    half_height = np.sqrt(50.0**2 - 49.5**2)
+    assert cov[0, 0, 0] == 1.0
+    assert cov[1, 0, 0] == pytest.approx(half_height**2 / 5, rel=0.45)
+
+
+def test_a_gap_ending_in_two_barely_meeting_discs_stays_finite():
+    """The regression of 0.15.0's first gap end: on this random S4 path (seed 134, clutter 5)
+    a gap ended with the target in two discs that barely meet; the new track's few draws
+    there had a variance of 0, and the RBCM estimate became NaN for the rest of the
+    episode (the environment then refused it)."""
+    env = gym.make("DGPTrack-v0", scenario="S4", clutter_rate=5.0, trajectory="random")
+    result = run_episode(env, dgpt_gym.make_tracker("dgpt-rbcm"), 134)
+    assert np.all(np.isfinite(result.mean)) and np.all(np.isfinite(result.var))
+
+
 def test_particle_moments_by_hand():
     states = np.array([[[0.0, 1.0], [2.0, 0.0]], [[4.0, 3.0], [2.0, 2.0]]])
     mean, cov = particle_moments(states, np.array([0.25, 0.75]))
