@@ -260,11 +260,11 @@ ss-rbcm-silence-1000-moments ss-rbcm-silence-1000-reports-0 ss-rbcm-silence-1000
 ss-rbcm-silence-1000-reports-0.1 ss-rbcm-silence-1000-reports-0.3
 ss-rbcm-silence-1000-reports-0.6 --paired-against ss-rbcm-silence-1000-moments``): the region alone
 (probability 0) left S1 at clutter 5 at 97.93 %; probabilities 0.02, 0.1, 0.3 and 0.6 took
-it to 98.76, 98.97, 99.14 and 99.31 %, but 0.3 and 0.6 cost RMSE on S2 and S3 (+0.10 +- 0.26
-and +0.15 +- 0.29 m on the reference paths), 0.1 none (-0.02 +- 0.17 / +0.08 +- 0.32 m on
-the reference / random paths; 3-sigma coverage over all cells 99.60 to 99.74 %, UCB
-coverage 99.84 to 99.92 %). Confirmed on seeds 1012-1023 (S1 at clutter 5 98.21 to
-98.86 %, RMSE -0.07 +- 0.17 / +0.01 +- 0.31 m)."""
+it to 98.69, 98.90, 99.07 and 99.24 %, but 0.3 and 0.6 cost RMSE on S2 and S3 (+0.10 +- 0.23
+and +0.14 +- 0.29 m on the reference paths), 0.1 none (-0.00 +- 0.17 / +0.09 +- 0.31 m on
+the reference / random paths; 3-sigma coverage over all cells 99.60 to 99.73 %, UCB
+coverage 99.84 to 99.91 %). Confirmed on seeds 1012-1023 (S1 at clutter 5 98.21 to
+98.86 %, RMSE -0.07 +- 0.17 / -0.03 +- 0.31 m)."""
 
 GAP_RESTART_PROBABILITY = 0.1
 """The prior probability of the new-track prediction at the end of a coverage gap
