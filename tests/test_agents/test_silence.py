@@ -208,6 +208,43 @@ def test_at_a_gaps_end_no_particle_where_the_reports_say_starts_a_new_track():
     )
 
 
+@pytest.mark.parametrize("neighbour_awake", [True, False])
+def test_a_new_tracks_region_leaves_out_awake_silent_discs_only(neighbour_awake):
+    """A track along sensor 0's disc, a gap, then a report by sensor 1, which no particle
+    reaches, so every prediction is the new track. Sensor 2, 40 m from sensor 1, does not
+    report: awake, its disc is cut from the region; asleep, it says nothing. The new
+    track's mean is checked against an independent Monte Carlo of the region (200000 points
+    uniform in sensor 1's disc), within five standard errors of the about 390 (awake) or 785
+    (asleep) of its 1000 draws that land in the region, and its variance within 30 %, about
+    four relative standard errors of a variance from 390 draws (sqrt(2 / 390) = 0.07)."""
+    spec = problem_spec(
+        sensor_positions=((200.0, 200.0), (600.0, 600.0), (640.0, 600.0)), n_steps=20
+    )
+    awake = np.array([True, True, neighbour_awake])
+    tracker = StateSpaceDGPT(silence_particles=1000)
+    tracker.reset(spec, seed=2)
+    for t in range(8):
+        points, sensors = ([[205.0 + 10.0 * t, 200.0]], [0]) if t < 5 else ([], [])
+        if t == 7:
+            points, sensors = [[570.0, 600.0]], [1]
+        observation = measurement_obs(t, np.reshape(points, (-1, 2)), sensors)
+        tracker.update({**observation, "awake": awake})
+    log_priors, means, covs, _ = tracker.step_predictions_
+    np.testing.assert_allclose(np.exp(log_priors), 1.0 / 3.0, rtol=1e-12)  # no particle there
+    rng = np.random.default_rng(0)
+    radius = 50.0 * np.sqrt(rng.random(200000))
+    angle = rng.uniform(0.0, 2.0 * np.pi, 200000)
+    region = np.array([600.0, 600.0]) + radius[:, None] * np.column_stack(
+        [np.cos(angle), np.sin(angle)]
+    )
+    if neighbour_awake:
+        region = region[np.hypot(*(region - [640.0, 600.0]).T) > 50.0]
+    kept = 1000 * region.shape[0] / 200000 * np.pi / 4  # draws in the 100 m box that land
+    tolerance = 5 * np.sqrt(region.var(axis=0) / kept)
+    np.testing.assert_array_less(np.abs(means[0, :, 0] - region.mean(axis=0)), tolerance)
+    np.testing.assert_allclose(covs[0, :, 0, 0], region.var(axis=0), rtol=0.3)
+
+
 def test_a_new_track_in_a_sliver_of_a_region_keeps_a_variance():
     """Two reporting discs whose centres are 99 m apart (R = 50 m) meet in a lens about 1 m
     wide and 14 m high. The new track's prediction is drawn in the box bounding the
