@@ -2,18 +2,15 @@
 
 import numpy as np
 import pytest
+from conftest import problem_spec
 
 from agents.screening import area_log_likelihood_ratios
 from baselines.shape_floor import shape_known_posteriors
-from dgpt_gym.problem import ProblemSpec
 
-SPEC = ProblemSpec(
-    sensor_positions=np.array([[50.0, 50.0], [150.0, 50.0], [100.0, 150.0]]),
+SPEC = problem_spec(
+    [[50.0, 50.0], [150.0, 50.0], [100.0, 150.0]],
     sensing_range=30.0,
-    noise_std=1.0,
     clutter_rate=0.05,  # rare clutter: a point's mode outweighs the uncovered area
-    detection_rate=1.0,
-    dt=1.0,
     area=200.0,
     clutter_sensors="all",
     n_steps=2,
@@ -86,16 +83,9 @@ def test_bad_arguments_name_themselves(displacements, n, message):
 
 
 def test_scans_that_rule_out_every_start_raise():
-    covering = ProblemSpec(
-        sensor_positions=np.array([[100.0, 100.0]]),
-        sensing_range=200.0,  # covers the whole area, and reports nothing
-        noise_std=1.0,
-        clutter_rate=1.0,
-        detection_rate=1.0,
-        dt=1.0,
-        area=200.0,
-        clutter_sensors="all",
-        n_steps=1,
+    # one sensor covering the whole area, reporting nothing
+    covering = problem_spec(
+        [[100.0, 100.0]], sensing_range=200.0, area=200.0, clutter_sensors="all", n_steps=1
     )
     empty = [(np.empty((0, 2)), np.empty(0, dtype=np.int64))]
     with pytest.raises(ValueError, match="rule out every drawn start"):
