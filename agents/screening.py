@@ -54,6 +54,7 @@ __all__ = [
     "sensing_probability",
     "initiation_scores",
     "disc_probability",
+    "near_densities",
 ]
 
 MAX_TARGET_SPEED = 50.0
@@ -88,7 +89,7 @@ def _log_products(densities, groups, n_groups, detection_rate, clutter_density) 
     return log_product
 
 
-def _near_densities(positions: np.ndarray, points: np.ndarray, noise_var: float):
+def near_densities(positions: np.ndarray, points: np.ndarray, noise_var: float):
     """The (position, point) pairs closer than 6 sigma (beyond, N(z; x, sigma^2 I) is below
     2e-8 of its peak): ``(position index (p,), point index (p,), N(z; x, sigma^2 I) (p,))``."""
     near = spatial.cKDTree(positions).sparse_distance_matrix(
@@ -141,7 +142,7 @@ def scan_log_likelihood_ratios(
     n_sensors = sensor_positions.shape[0]
     pair_log_ratio = np.full(pair_position.size, -np.inf)  # no point near: ruled out
     if points.shape[0]:
-        near_position, near_point, densities = _near_densities(positions, points, noise_var)
+        near_position, near_point, densities = near_densities(positions, points, noise_var)
         # keyed by (position, sensor); the keys of sensors that do not cover the position
         # (or sleep) are never looked up below
         near_key = near_position * n_sensors + sensors[near_point]
@@ -250,7 +251,7 @@ def scan_posterior(
         chosen = rng.integers(0, m, n - n_uniform)
         scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
         positions[n_uniform:] = points[chosen] + scatter
-        near_position, _, density = _near_densities(positions, points, noise_var)
+        near_position, _, density = near_densities(positions, points, noise_var)
         proposal += (
             (n - n_uniform) / n / m * np.bincount(near_position, weights=density, minlength=n)
         )

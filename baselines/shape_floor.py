@@ -7,27 +7,35 @@ one sensor alone covers explains that sensor's scan as well as the target does
 (:mod:`agents.screening`). The clairvoyant floor (:mod:`baselines.clairvoyant`) is told
 which points are the target's and so never sees this ambiguity. This floor is told less:
 the path's *shape*, the displacements d_t = x_t - x_0 of the true path, but not its start
-x_0, for which it takes a prior uniform over the area. It also knows the measurement model
-and its rates. Its estimate at step t is the posterior mean of x_0 given the scans of steps
-0..t, plus d_t; the posterior is
+x_0. It also knows the measurement model and its rates.
 
-    p(x_0 | Z_0..t) ∝ 1[x_0 + d_tau in the area for tau <= t] prod_{tau <= t} LR_tau(x_0 + d_tau),
+**The start's law given the shape.** :meth:`dgpt_gym.scenarios.Scenario.sample` draws a
+path's shape, then translates it by an offset uniform among those that keep it inside
+``[margin, area - margin]^2``. Given the shape, x_0 is therefore uniform on the box
+B = [margin - min_t d_t, area - margin - max_t d_t] (per axis; :func:`start_box`). With
+that prior the posterior after steps 0..t is
+
+    p(x_0 | d, Z_0..t) ∝ 1[x_0 in B] prod_{tau <= t} LR_tau(x_0 + d_tau),
 
 with LR_tau the likelihood ratio of step tau's scans for a target at a position against no
 target (:func:`agents.screening.area_log_likelihood_ratios`): 0 where a sensor covers the
-position and reports nothing near it, 1 where no sensor covers it.
+position and reports nothing within 6 sigma of it, 1 where no sensor covers it. Its mean
+plus d_t is the floor's estimate of x_t.
 
-A tracker that does not know the shape can do no better on average over starts drawn
-uniformly, since it knows less. On a given episode this is an estimator's error, not a bound:
-a tracker whose guesses happen to favour that episode's start can beat it there. It answers
-whether a goal such as "RMSE with clutter at every sensor at most twice that with clutter at
-the detecting sensors" is reachable: where this floor's error over the first steps alone
-already exceeds it, no tracker that is not told the start can be expected to meet it.
+**What it shows.** For random paths (``trajectory="random"``) this is the exact posterior
+given the shape and the scans, so its mean is the least mean-squared-error estimate from
+them: over random-path episodes, no tracker, which sees the scans but not the shape, has a
+smaller mean squared error at any step, up to the Monte Carlo error of the sampler below.
+The reference path (``trajectory="fixed"``) is one such draw; the floor then treats it as if
+its start were unknown, and on one fixed path it is an estimator's error, not a bound.
+Where the floor's error already exceeds a goal, no tracker can be expected to meet it;
+where it does not, the goal is not ruled out, though a tracker that is not told the shape
+may still be unable to reach it.
 
-The posterior is computed by self-normalised importance sampling over x_0, with draws one
-third uniform over the area and two thirds around the candidates z - d_tau (every
-measurement z of every step tau, shifted back to the start), whose density the weights
-divide by, as :func:`agents.screening.scan_posterior` does for one step.
+**How.** Self-normalised importance sampling over x_0, with draws one third uniform over B
+and two thirds around the candidates z - d_tau inside B (every measurement z of every step
+tau, shifted back to the start), whose density the weights divide by, as
+:func:`agents.screening.scan_posterior` does for one step.
 """
 
 from __future__ import annotations
@@ -35,18 +43,28 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import spatial
 
-from agents.screening import area_log_likelihood_ratios
+from agents.screening import area_log_likelihood_ratios, near_densities
 from dgpt_gym.problem import ProblemSpec
 
-__all__ = ["shape_known_posteriors", "CANDIDATE_STEPS"]
+__all__ = ["shape_known_posteriors", "start_box"]
 
-CANDIDATE_STEPS = 8
-"""The draws around candidates z - d_tau take z from the first 8 steps only: the start is
-ambiguous over a few steps at most (a median of 0-2 on S1-S4), and candidates from every
-step would spread the draws thinly over the first steps' modes. Any choice leaves the
-estimate consistent: the uniform third of the draws covers the whole area."""
+
+def start_box(
+    displacements: np.ndarray, area: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The box (low (2,), high (2,)) of the starts that keep a path of these displacements
+    (T, 2) inside ``[margin, area - margin]^2``: the support of the start's law given the
+    shape (module docstring)."""
+    displacements = np.asarray(displacements, dtype=float)
+    low = margin - displacements.min(axis=0)
+    high = area - margin - displacements.max(axis=0)
+    if np.any(high < low):
+        raise ValueError(
+            f"displacements span {displacements.max(axis=0) - displacements.min(axis=0)} m, "
+            f"more than the {area - 2 * margin} m that the area and margin allow"
+        )
+    return low, high
 
 
 def shape_known_posteriors(
@@ -55,7 +73,7 @@ def shape_known_posteriors(
     spec: ProblemSpec,
     n: int,
     rng: np.random.Generator,
-    candidate_steps: int = CANDIDATE_STEPS,
+    box: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The posterior of the start x_0 after each of the first K steps (module docstring).
 
@@ -65,8 +83,8 @@ def shape_known_posteriors(
         spec: the problem (sensors, range, rates, area; sigma = its ``model_noise_std``).
         n: importance draws of x_0, at least 3.
         rng: the draws' generator.
-        candidate_steps: the draws around candidates use the measurements of the first
-            this many steps only (:data:`CANDIDATE_STEPS`).
+        box: ``(low (2,), high (2,))``, the support of x_0's uniform prior
+            (:func:`start_box` of the whole path); the area if None.
 
     Returns ``(means (K, 2), covs (K, 2, 2), ess (K,))``: the posterior mean and covariance
     of x_0 after steps 0..t, and the effective number of the draws behind them
@@ -83,32 +101,40 @@ def shape_known_posteriors(
         raise ValueError(f"displacements[0] must be 0 (d_0 = x_0 - x_0); got {displacements[0]}")
     if n < 3:
         raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
+    low, high = np.zeros(2), np.full(2, float(spec.area))
+    if box is not None:
+        if len(box) != 2:
+            raise ValueError(f"box must be (low (2,), high (2,)); got {box!r}")
+        low, high = (np.asarray(bound, dtype=float) for bound in box)
+        if low.shape != (2,) or high.shape != (2,) or not np.all(low < high):
+            raise ValueError(f"box must be (low (2,), high (2,)) with low < high; got {box!r}")
     noise_var = spec.model_noise_std**2
     candidates = np.concatenate(
         [
             np.asarray(points, dtype=float).reshape(-1, 2) - displacements[t]
-            for t, (points, _) in enumerate(scans[:candidate_steps])
+            for t, (points, _) in enumerate(scans)
         ]
     )
+    reach = 6.0 * np.sqrt(noise_var)  # a candidate's draws reach this far
+    candidates = candidates[
+        np.all((candidates > low - reach) & (candidates < high + reach), axis=1)
+    ]
     n_uniform = n if not candidates.shape[0] else n // 3
-    starts = rng.random((n, 2)) * spec.area
-    proposal = np.full(n, n_uniform / n / spec.area**2)
+    starts = low + rng.random((n, 2)) * (high - low)
+    proposal = np.full(n, n_uniform / n / np.prod(high - low))
     if candidates.shape[0]:
         chosen = rng.integers(0, candidates.shape[0], n - n_uniform)
-        starts[n_uniform:] = candidates[chosen] + rng.standard_normal((n - n_uniform, 2)) * np.sqrt(
-            noise_var
-        )
-        near = spatial.cKDTree(starts).sparse_distance_matrix(
-            spatial.cKDTree(candidates), 6.0 * np.sqrt(noise_var), output_type="ndarray"
-        )
-        density = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
+        scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
+        starts[n_uniform:] = candidates[chosen] + scatter
+        near_start, _, density = near_densities(starts, candidates, noise_var)
         proposal += (
             (n - n_uniform)
             / n
             / candidates.shape[0]
-            * np.bincount(near["i"].astype(np.int64), weights=density, minlength=n)
+            * np.bincount(near_start, weights=density, minlength=n)
         )
-    log_weight = -np.log(proposal)  # the uniform prior's density is a constant
+    inside = np.all((starts >= low) & (starts <= high), axis=1)
+    log_weight = np.where(inside, -np.log(proposal), -np.inf)  # the prior is flat on the box
     means, covs, ess = np.empty((k, 2)), np.empty((k, 2, 2)), np.empty(k)
     for t, (points, sensors) in enumerate(scans):
         log_weight = log_weight + area_log_likelihood_ratios(
@@ -121,7 +147,7 @@ def shape_known_posteriors(
         if not np.any(np.isfinite(log_weight)):
             raise ValueError(
                 f"the scans of steps 0..{t} rule out every drawn start: the displacements "
-                "do not fit the scans, or n is too small"
+                "or the box do not fit the scans, or n is too small"
             )
         weights = np.exp(log_weight - np.max(log_weight))
         weights /= weights.sum()
