@@ -15,7 +15,7 @@ path's shape, then translates it by an offset uniform among those that keep it i
 B = [margin - min_t d_t, area - margin - max_t d_t] (per axis; :func:`start_box`). With
 that prior the posterior after steps 0..t is
 
-    p(x_0 | d, Z_0..t) ∝ 1[x_0 in B] prod_{tau <= t} LR_tau(x_0 + d_tau),
+    p(x_0 | d, Z_0..t) = const 1[x_0 in B] prod_{tau <= t} LR_tau(x_0 + d_tau),
 
 with LR_tau the likelihood ratio of step tau's scans for a target at a position against no
 target (:func:`agents.screening.area_log_likelihood_ratios`): 0 where a sensor covers the
