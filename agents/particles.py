@@ -17,8 +17,11 @@ def kernel_scale(n: int, dimension: int = 4) -> float:
     return (4.0 / (n * (dimension + 2.0))) ** (2.0 / (dimension + 4.0))
 
 
-def resample_systematic(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Indices (N,) of systematic resampling (one uniform draw; Douc, Cappe & Moulines 2005)."""
-    n = weights.size
+def resample_systematic(
+    weights: np.ndarray, rng: np.random.Generator, n: int | None = None
+) -> np.ndarray:
+    """Indices (n,) of systematic resampling of the weights (N,) summing to one (one
+    uniform draw; Douc, Cappe & Moulines 2005); n = N unless given."""
+    n = weights.size if n is None else n
     positions = (rng.random() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(np.cumsum(weights), positions), n - 1)
+    return np.minimum(np.searchsorted(np.cumsum(weights), positions), weights.size - 1)

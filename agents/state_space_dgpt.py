@@ -100,6 +100,7 @@ from agents import aggregation as agg
 from agents.gating import gate_measurements, target_probabilities
 from agents.particles import kernel_scale, resample_systematic
 from agents.screening import ClutterScreen, area_log_likelihood_ratios, scan_posterior
+from agents.search import SearchFilter
 from agents.silence import (
     draw_particles,
     particle_moments,
@@ -266,6 +267,12 @@ the reference / random paths; 3-sigma coverage over all cells 99.60 to 99.73 %, 
 coverage 99.84 to 99.91 %). Confirmed on seeds 1012-1023 (S1 at clutter 5 98.21 to
 98.86 %, RMSE -0.07 +- 0.17 / -0.03 +- 0.31 m)."""
 
+SEARCH = {"process_noise": 25.0, "birth_probability": 0.1, "settle_std": 3.0}
+"""The search filter's settings (:class:`agents.search.SearchFilter`; with clutter at every
+sensor and ``search_particles`` > 0): the NCV intensity of its particles (m^2/s^3), the
+prior probability per step of a target somewhere new, and the position standard deviation
+(m) at which a track starts from it."""
+
 GAP_RESTART_PROBABILITY = 0.1
 """The prior probability of the new-track prediction at the end of a coverage gap
 (:data:`GAP_ENDS`), chosen there."""
@@ -414,6 +421,9 @@ class StateSpaceDGPT(TrackerBase):
         process_noise_prior: str = "none",
         gap_end: str = "reports",
         gap_restart_probability: float = GAP_RESTART_PROBABILITY,
+        search_particles: int = 0,
+        search_settle_std: float = SEARCH["settle_std"],
+        search_birth_probability: float = SEARCH["birth_probability"],
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.window = check_integer("window", window, low=1)
@@ -458,6 +468,22 @@ class StateSpaceDGPT(TrackerBase):
             high=1.0,
             high_inclusive=False,
         )
+        self.search_particles = check_integer("search_particles", search_particles, low=0)
+        if 0 < self.search_particles < 10:
+            raise ValueError(
+                f"search_particles must be 0 (off) or at least 10; got {search_particles!r}"
+            )
+        self.search_settle_std = check_real(
+            "search_settle_std", search_settle_std, low=0.0, low_inclusive=False
+        )
+        self.search_birth_probability = check_real(
+            "search_birth_probability",
+            search_birth_probability,
+            low=0.0,
+            high=1.0,
+            low_inclusive=False,
+            high_inclusive=False,
+        )
         try:
             rates = tuple(turn_rates)
         except TypeError:
@@ -486,6 +512,18 @@ class StateSpaceDGPT(TrackerBase):
         self.screen_ = ClutterScreen(
             spec, self.admission_probability, self.silence_particles, self.rng_
         )
+        self.search_ = None  # before the first track, with clutter at every sensor
+        if self.search_particles and spec.clutter_sensors == "all" and spec.clutter_rate > 0:
+            self.search_ = SearchFilter(
+                spec,
+                self.search_particles,
+                self.rng_.spawn(1)[0],  # its own stream: the tracker's draws stay as they were
+                INITIAL_SPEED_STD,
+                SEARCH["process_noise"],
+                self.search_birth_probability,
+                self.search_settle_std,
+            )
+        self.search_estimate_ = None
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
@@ -593,6 +631,8 @@ class StateSpaceDGPT(TrackerBase):
             keep, started = self.screen_.screen(
                 points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
             )
+            if self.search_ is not None and self.mean_ is None:
+                keep, started = self._search(step, points, sensors, obs.get("awake"), keep, started)
             points, sensors = points[keep], sensors[keep]
             if started:
                 self._start_track()
@@ -601,7 +641,10 @@ class StateSpaceDGPT(TrackerBase):
                 self.last_estimate_ = self._silent_step(step, obs.get("awake"), scan)
                 return None
             if scan is not None:
-                self.last_estimate_ = self._scan_estimate(*scan, obs.get("awake"))
+                if self.search_estimate_ is not None:
+                    self.last_estimate_ = self.search_estimate_
+                else:
+                    self.last_estimate_ = self._scan_estimate(*scan, obs.get("awake"))
                 return None
         gap_predictions = None
         if self.particles_ is not None and self.gap_end == "reports" and scan is None:
@@ -906,6 +949,41 @@ class StateSpaceDGPT(TrackerBase):
         if not np.any(np.isfinite(log_ratio)):
             return np.zeros(positions.shape[0])
         return np.exp(log_ratio - np.max(log_ratio))
+
+    def _search(self, step, points, sensors, awake, keep, started):
+        """Before the first track, with clutter at every sensor: the search filter
+        (:class:`agents.search.SearchFilter`) takes the step's scans, and a track starts
+        from the points within 3 sqrt(2) sigma of its mean once it has settled, unless the
+        screen's own start came first. Keeps the filter's estimate in ``search_estimate_``
+        (its moments, and the UCB under the kernel density of its particles as in
+        :meth:`_silent_step`; None when the scans rule it out). Returns ``(keep,
+        started)`` as :meth:`agents.screening.ClutterScreen.screen` does."""
+        self.search_estimate_ = None
+        if started:
+            self.search_.reset()
+            return keep, started
+        searched = self.search_.step(step, points, sensors, awake)
+        if searched is None:
+            return keep, started
+        mean, var, settled = searched
+        positions = self.search_.states[:, :, 0]
+        kernel_var = kernel_scale(positions.shape[0], dimension=2) * var
+        ucb = agg.mixture_half_width(
+            np.full(positions.shape[0], 1.0 / positions.shape[0]),
+            positions - mean,
+            np.broadcast_to(np.sqrt(kernel_var), positions.shape),
+            self.delta,
+        )
+        self.search_estimate_ = Estimate(mean, var + kernel_var, ucb)
+        if settled:
+            near = np.sum((points - mean) ** 2, axis=1) <= 18.0 * self.spec_.model_noise_std**2
+            if near.any():
+                self.screen_.searching = False
+                self.screen_.candidates = np.empty((0, 3))
+                self.search_.reset()
+                self.search_estimate_ = None
+                return near, True
+        return keep, started
 
     def _scan_estimate(self, points, sensors, awake) -> Estimate:
         """A step without a track, with clutter at every sensor, on which no track starts:
