@@ -270,6 +270,20 @@ CANDIDATES = {
         )
         for probability in (0.0, 0.02, 0.1, 0.3, 0.6)
     },
+    **{
+        f"ss-rbcm-silence-1000-search-{settle:g}-{birth:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "search_particles": 2000,
+                "search_settle_std": settle,
+                "search_birth_probability": birth,
+            },
+        )
+        for settle in (1.5, 3.0, 6.0)
+        for birth in (0.05, 0.1, 0.3)
+    },
     "ss-rbcm-silence-1000-moments": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "silence_particles": 1000, "gap_end": "moments"},
