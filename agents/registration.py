@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, TREND_SUFFIX, tracker_id
 
-__all__ = ["TRACKERS", "PAPER_MODEL", "SILENCE_PARTICLES", "RENAMED"]
+__all__ = ["TRACKERS", "PAPER_MODEL", "SILENCE_PARTICLES", "SEARCH_PARTICLES", "RENAMED"]
 
 PAPER_MODEL = {"mean": "zero"}
 """The paper's GP model as printed: zero prior mean on raw coordinates, with the SE kernel,
@@ -32,6 +32,19 @@ ss-rbcm-silence-1000 imm-pda --paired-against ss-rbcm-4``) DGPT-RBCM with the si
 8.23 / 17.43 m; IMM-PDA 7.52 / 16.95 m), with the same 3-sigma coverage on detected steps
 (99.35 against 99.37 %) and UCB coverage (99.84 against 99.89 %)."""
 
+SEARCH_PARTICLES = 2000
+"""Particles of the search before the first track with clutter at every sensor
+(``StateSpaceDGPT(search_particles=N)``, :class:`agents.search.SearchFilter`; since 0.16.0
+in every registered ``dgpt-*`` and ``gp``; it acts only with ``clutter_sensors="all"``). On
+training seeds 1000-1011 (S1-S4, both path modes, clutter rate 1; ``python
+scripts/model_study.py --first-seed 1000 --seeds 12 --clutter-rates 1 --clutter-sensors all
+--candidates ss-rbcm-silence-1000-reports-0.1 ss-rbcm-silence-1000-search-3-0.1
+--paired-against ss-rbcm-silence-1000-reports-0.1``) DGPT-RBCM's RMSE went from 43.7 / 44.3
+m to 35.2 / 37.4 m on the reference / random paths (paired -8.5 +- 9.2 / -6.9 +- 7.4 m)."""
+
+SEARCHING = {"silence_particles": SILENCE_PARTICLES, "search_particles": SEARCH_PARTICLES}
+"""The keyword arguments with which every registered state-space GP tracker is built."""
+
 AGGREGATIONS = ("rbcm", "gpoe", "bcm", "poe")
 
 TRACKERS: tuple[tuple[str, str, dict], ...] = (
@@ -39,7 +52,7 @@ TRACKERS: tuple[tuple[str, str, dict], ...] = (
         (
             f"dgpt-{aggregation}",
             "agents.state_space_dgpt:StateSpaceDGPT",
-            {"aggregation": aggregation, "silence_particles": SILENCE_PARTICLES},
+            {"aggregation": aggregation, **SEARCHING},
         )
         for aggregation in AGGREGATIONS
     ),

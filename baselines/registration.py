@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from agents.registration import PAPER_MODEL, SILENCE_PARTICLES
+from agents.registration import PAPER_MODEL, SEARCHING
 from dgpt_gym.naming import INPUTS, PAPER_SUFFIX, TREND_SUFFIX, tracker_id
 
 __all__ = ["TRACKERS"]
 
 TRACKERS: tuple[tuple[str, str, dict], ...] = (
     ("centroid", "baselines.centroid:GatedCentroidTracker", {}),
-    ("gp", "baselines.standard_gp:StateSpaceGP", {"silence_particles": SILENCE_PARTICLES}),
+    ("gp", "baselines.standard_gp:StateSpaceGP", SEARCHING),
     *(
         (
             tracker_id("gp", inputs, TREND_SUFFIX),
