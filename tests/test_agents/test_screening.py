@@ -580,20 +580,28 @@ def test_the_joint_screen_admits_only_sensing_sensors():
 def test_without_a_track_the_estimate_is_the_posterior_of_the_scan():
     """Step 0, no track yet (a start needs two steps): four sensors cover the whole 100 m
     area, the three covering the target at (30, 60) report a point of it, every sensor one
-    clutter point that the others contradict. The estimate is the scan's posterior mean,
-    within 1 m of the target, and the UCB covers it; the area's centre is 22 m away."""
+    clutter point that the others contradict. Without the search filter the estimate is the
+    scan's posterior mean, within 1 m of the target, and the UCB covers it; the area's
+    centre is 22 m away. The registered tracker's search filter starts from the same
+    posterior, which has settled, so its track starts at once, there."""
     sensors_at = np.array([[25.0, 25.0], [75.0, 25.0], [25.0, 75.0], [75.0, 75.0]])
     target = np.array([30.0, 60.0])
     rng = np.random.default_rng(5)
     points = np.vstack([target + rng.normal(0.0, 1.0, (3, 2)), sensors_at + [20.0, -10.0]])
     sensors = np.array([0, 2, 3, 0, 1, 2, 3])
-    tracker = make_tracker("dgpt-rbcm")
-    tracker.reset(problem_spec(sensors_at, clutter_sensors="all", area=100.0), seed=0)
+    spec = problem_spec(sensors_at, clutter_sensors="all", area=100.0)
+    tracker = make_tracker("dgpt-rbcm", search_particles=0)
+    tracker.reset(spec, seed=0)
     estimate = tracker.update(measurement_obs(0, points, sensors))
     assert tracker.screen_.searching and tracker.mean_ is None
     assert np.linalg.norm(estimate.mean - target) < 1.0
     assert np.all(np.abs(estimate.mean - target) <= estimate.ucb)
     assert np.all(estimate.var < 1.0)
+    searching = make_tracker("dgpt-rbcm")
+    searching.reset(spec, seed=0)
+    estimate = searching.update(measurement_obs(0, points, sensors))
+    assert not searching.screen_.searching and searching.new_track_
+    assert np.linalg.norm(estimate.mean - target) < 1.0
 
 
 def edge_tracker():
