@@ -75,7 +75,12 @@ the screen weighs all scans together (N positions drawn from the prediction), a 
 which it admits no sensor is a gap step whose particles are weighted by the likelihood ratio
 of every scan of the step (:func:`agents.screening.scan_log_likelihood_ratios`; the silence
 is its case without points), and a step without a track returns the posterior of its scans
-alone (:meth:`_scan_estimate`) instead of the area's centre.
+alone (:meth:`_scan_estimate`) instead of the area's centre. With ``search_particles`` > 0
+(the registered trackers since 0.16.0) the steps before the first track are filtered
+instead, from the first scan on, by :class:`agents.search.SearchFilter`, whose births from
+pairs of points of consecutive steps let the motion tell the target's points from clutter;
+the first track starts where it settles (:meth:`_search`), or where the screen's start
+comes first.
 
 With ``silence_particles`` and clutter at the detecting sensors only, a coverage gap is
 filtered by particles conditioned on the silence of the awake sensors, and at the gap's end
@@ -397,6 +402,13 @@ class StateSpaceDGPT(TrackerBase):
             (:data:`GAP_ENDS`).
         gap_restart_probability: the prior probability of a new track there, in [0, 1)
             (:data:`GAP_RESTART_PROBABILITY`).
+        search_particles: with clutter at every sensor only: 0 (off), or N >= 10 particles of
+            the search before the first track (:class:`agents.search.SearchFilter`; the
+            registered trackers use :data:`agents.registration.SEARCH_PARTICLES`).
+        search_settle_std: m, the search's position standard deviation per axis at which
+            the first track starts (:data:`SEARCH`).
+        search_birth_probability: the search's prior probability per step of a target
+            somewhere new, in (0, 1) (:data:`SEARCH`).
     """
 
     name = "dgpt-bcm"
