@@ -234,13 +234,16 @@ def scan_posterior(
     n: int,
     rng: np.random.Generator,
     awake: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray] | None:
+    with_log_evidence: bool = False,
+):
     """The posterior of the target's position from one step's scans and a prior uniform
     over the area, as ``n`` importance-weighted positions: one third drawn uniformly, two
     thirds around the measurements (N(z_j, sigma^2 I), z_j uniform among them), weighted by
     the scans' likelihood ratio (:func:`scan_log_likelihood_ratios`) over the proposal
-    density. Returns ``(positions (n, 2), weights (n,) summing to one)``, or None when the
-    scans rule out every drawn position."""
+    density. Returns ``(positions (n, 2), weights (n,) summing to one)``, and with
+    ``with_log_evidence`` also the log of the weights' mean before normalising times the
+    prior's density: log E[LR] under the uniform prior, the scans' evidence against no
+    target. None when the scans rule out every drawn position."""
     if n < 3:
         raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
     area, m = spec.area, points.shape[0]
@@ -260,7 +263,11 @@ def scan_posterior(
     ) - np.log(proposal)
     if not np.any(np.isfinite(log_weight)):
         return None
-    weights = np.exp(log_weight - np.max(log_weight))
+    top = np.max(log_weight)
+    weights = np.exp(log_weight - top)
+    if with_log_evidence:
+        log_evidence = top + np.log(weights.mean()) - 2.0 * np.log(area)
+        return positions, weights / weights.sum(), log_evidence
     return positions, weights / weights.sum()
 
 

@@ -51,16 +51,16 @@ def pair_births(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """``n`` states born from pairs (a, b) of a previous-step point a (m0, 2) and a
     current-step point b (m1, 2) closer than :data:`agents.screening.MAX_TARGET_SPEED` x
-    ``dt``: a pair drawn uniformly among them, the position b + e_b and the velocity
-    (b - a) / dt + e_v with e_b ~ N(0, s^2 I), e_v ~ N(0, 2 s^2 / dt^2 I), s^2 =
+    ``dt``: a pair drawn uniformly among the K of them, the position b + e_b and the
+    velocity (b - a) / dt + e_v with e_b ~ N(0, s^2 I), e_v ~ N(0, 2 s^2 / dt^2 I), s^2 =
     ``noise_var`` (the spread of the position and of the difference of two measurements).
 
     Returns ``(states (n, 2 axes, 2) = [position, velocity], log_ratio (n,))``, log_ratio =
     log prior - log proposal - log n: the prior of a new target, position uniform over the
-    ``area`` square and velocity N(0, ``speed_std``^2 I), over the density of the draw's own
-    pair component divided by the number of pairs (pairs whose components overlap, which
-    needs points within a few sigma of each other, are counted once each). None without a
-    pair."""
+    ``area`` square and velocity N(0, ``speed_std``^2 I), over the proposal's density, the
+    mixture (1/K) sum_k of every pair's Gaussian (the target's several points per step give
+    pairs whose Gaussians overlap; components beyond 8 standard deviations, below e^-32 of
+    their peak, are left out). None without a pair."""
     if not previous.shape[0] or not current.shape[0]:
         return None
     near = spatial.cKDTree(current).sparse_distance_matrix(
@@ -68,20 +68,25 @@ def pair_births(
     )
     if not near.size:
         return None
-    chosen = rng.integers(0, near.size, n)
-    b = current[near["i"][chosen]]
-    a = previous[near["j"][chosen]]
-    position_noise = rng.standard_normal((n, 2)) * np.sqrt(noise_var)
     velocity_var = 2.0 * noise_var / dt**2
-    velocity_noise = rng.standard_normal((n, 2)) * np.sqrt(velocity_var)
-    position, velocity = b + position_noise, (b - a) / dt + velocity_noise
+    # each pair's Gaussian is the standard normal in these scaled [position, velocity]
+    scale = np.r_[np.full(2, np.sqrt(noise_var)), np.full(2, np.sqrt(velocity_var))]
+    ends = current[near["i"]]
+    centres = np.column_stack([ends, (ends - previous[near["j"]]) / dt])
+    chosen = rng.integers(0, near.size, n)
+    draws = centres[chosen] + rng.standard_normal((n, 4)) * scale
+    overlap = spatial.cKDTree(draws / scale).sparse_distance_matrix(
+        spatial.cKDTree(centres / scale), 8.0, output_type="ndarray"
+    )
+    kernel_sum = np.bincount(
+        overlap["i"].astype(np.int64), weights=np.exp(-0.5 * overlap["v"] ** 2), minlength=n
+    )
     log_proposal = (
-        -0.5 * np.sum(position_noise**2, axis=1) / noise_var
-        - np.log(2.0 * np.pi * noise_var)
-        - 0.5 * np.sum(velocity_noise**2, axis=1) / velocity_var
-        - np.log(2.0 * np.pi * velocity_var)
+        np.log(kernel_sum)
+        - np.log((2.0 * np.pi) ** 2 * noise_var * velocity_var)
         - np.log(near.size)
     )
+    position, velocity = draws[:, :2], draws[:, 2:]
     log_prior = (
         -2.0 * np.log(area)
         - 0.5 * np.sum(velocity**2, axis=1) / speed_std**2
@@ -138,13 +143,14 @@ class SearchFilter:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         sensors = np.asarray(sensors)
         if self.states is None:
-            posterior = scan_posterior(points, sensors, spec, self.noise_var, self.n, rng, awake)
+            posterior = scan_posterior(
+                points, sensors, spec, self.noise_var, self.n, rng, awake, with_log_evidence=True
+            )
             if posterior is None:
                 return None
-            positions, weights = posterior
+            positions, weights, self.log_evidence = posterior
             velocities = rng.standard_normal((self.n, 2)) * self.speed_std
             states = np.stack([positions, velocities], axis=2)
-            self.log_evidence = 0.0
         else:
             dt = (step - self.last_step) * spec.dt
             states = propagate_particles(

@@ -529,7 +529,8 @@ class StateSpaceDGPT(TrackerBase):
             self.search_ = SearchFilter(
                 spec,
                 self.search_particles,
-                self.rng_.spawn(1)[0],  # its own stream: the tracker's draws stay as they were
+                # its own stream (Generator.spawn's child): the tracker's draws stay as they were
+                np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]),
                 INITIAL_SPEED_STD,
                 SEARCH["process_noise"],
                 self.search_birth_probability,
@@ -648,15 +649,15 @@ class StateSpaceDGPT(TrackerBase):
             points, sensors = points[keep], sensors[keep]
             if started:
                 self._start_track()
+        if self.search_estimate_ is not None and not points.shape[0] and self.mean_ is None:
+            self.last_estimate_ = self.search_estimate_
+            return None
         if self.silence_particles and not points.shape[0]:
             if self.mean_ is not None:
                 self.last_estimate_ = self._silent_step(step, obs.get("awake"), scan)
                 return None
             if scan is not None:
-                if self.search_estimate_ is not None:
-                    self.last_estimate_ = self.search_estimate_
-                else:
-                    self.last_estimate_ = self._scan_estimate(*scan, obs.get("awake"))
+                self.last_estimate_ = self._scan_estimate(*scan, obs.get("awake"))
                 return None
         gap_predictions = None
         if self.particles_ is not None and self.gap_end == "reports" and scan is None:

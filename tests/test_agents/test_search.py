@@ -12,32 +12,40 @@ from agents.search import SearchFilter, pair_births
 
 
 def test_pair_births_by_hand():
-    """One pair within reach ((0, 0) then (10, 0); the far point has none): the births sit
-    at the second point with the pair's velocity, and their log ratio is the new target's
-    prior over the draw's density (scipy's normal densities), over n."""
+    """Two pairs within reach, (0, 0) then (10, 0) or (10.5, 0), whose Gaussians overlap
+    (the far point has no pair): the births sit at the pairs' second points with their
+    velocities, and their log ratio is the new target's prior over the two pairs' mixture
+    density (scipy's normal densities), over n."""
     previous = np.array([[0.0, 0.0]])
-    current = np.array([[10.0, 0.0], [10.0 + MAX_TARGET_SPEED + 1.0, 0.0]])
+    current = np.array([[10.0, 0.0], [10.5, 0.0], [10.0 + MAX_TARGET_SPEED + 1.0, 0.0]])
     noise_var, speed_std, area, n = 0.25, 25.0, 1000.0, 500
     states, log_ratio = pair_births(
         previous, current, noise_var, 1.0, speed_std, area, n, np.random.default_rng(0)
     )
     position, velocity = states[:, :, 0], states[:, :, 1]
-    np.testing.assert_allclose(position.mean(axis=0), [10.0, 0.0], atol=5 * 0.5 / np.sqrt(n))
-    np.testing.assert_allclose(velocity.mean(axis=0), [10.0, 0.0], atol=5 * 0.71 / np.sqrt(n))
+    np.testing.assert_allclose(position.mean(axis=0), [10.25, 0.0], atol=0.05)
+    np.testing.assert_allclose(velocity.mean(axis=0), [10.25, 0.0], atol=0.1)
+    proposal = np.mean(
+        [
+            stats.multivariate_normal([end, 0], noise_var).pdf(position)
+            * stats.multivariate_normal([end, 0], 2 * noise_var).pdf(velocity)
+            for end in (10.0, 10.5)
+        ],
+        axis=0,
+    )
     expected = (
         -2 * np.log(area)
         + stats.multivariate_normal([0, 0], speed_std**2).logpdf(velocity)
-        - stats.multivariate_normal([10, 0], noise_var).logpdf(position)
-        - stats.multivariate_normal([10, 0], 2 * noise_var).logpdf(velocity)
+        - np.log(proposal)
         - np.log(n)
     )
     np.testing.assert_allclose(log_ratio, expected, rtol=1e-10)
-    assert pair_births(previous, current[1:], noise_var, 1.0, speed_std, area, n, None) is None
+    assert pair_births(previous, current[2:], noise_var, 1.0, speed_std, area, n, None) is None
 
 
 def test_the_search_settles_on_the_target_under_one_sensor_at_a_time():
     """S2's reference path with clutter at every sensor, where one sensor at a time senses
-    the target and one scan cannot tell its point from clutter: within 5 steps the filter
+    the target and one scan cannot tell its point from clutter: within 9 steps the filter
     settles, and wherever it has settled it is within 3 m of the target (training seeds)."""
     for seed in range(1000, 1004):
         env = gym.make(
@@ -53,7 +61,9 @@ def test_the_search_settles_on_the_target_under_one_sensor_at_a_time():
             if settled:
                 settled_steps.append(step)
                 assert np.linalg.norm(mean - env.trajectory_.positions[step]) < 3.0
-        assert settled_steps and settled_steps[0] <= 5, seed
+        # before the screen's own start (steps 10-12 on these seeds); over 8 other random
+        # streams of the filter the first settled step was 1-9
+        assert settled_steps and settled_steps[0] <= 9, seed
 
 
 def test_the_search_restarts_when_the_scans_rule_out_everything():
