@@ -40,7 +40,8 @@ training seeds 1000-1011 (S1-S4, both path modes, clutter rate 1; ``python
 scripts/model_study.py --first-seed 1000 --seeds 12 --clutter-rates 1 --clutter-sensors all
 --candidates ss-rbcm-silence-1000-reports-0.1 ss-rbcm-silence-1000-search-3-0.1
 --paired-against ss-rbcm-silence-1000-reports-0.1``) DGPT-RBCM's RMSE went from 43.7 / 44.3
-m to 35.2 / 37.4 m on the reference / random paths (paired -8.5 +- 9.2 / -6.9 +- 7.4 m)."""
+m to 35.4 / 35.6 m on the reference / random paths (paired -8.2 +- 8.9 / -8.7 +- 7.3 m);
+seeds 1012-1023: -12.4 +- 8.2 / -12.3 +- 12.2 m."""
 
 SEARCHING = {"silence_particles": SILENCE_PARTICLES, "search_particles": SEARCH_PARTICLES}
 """The keyword arguments with which every registered state-space GP tracker is built."""
