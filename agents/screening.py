@@ -55,6 +55,7 @@ __all__ = [
     "initiation_scores",
     "disc_probability",
     "near_densities",
+    "draws_near_candidates",
 ]
 
 MAX_TARGET_SPEED = 50.0
@@ -226,6 +227,36 @@ def joint_sensing_probability(
     )
 
 
+def draws_near_candidates(
+    candidates: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    noise_var: float,
+    n: int,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` importance draws for a position posterior whose modes sit at ``candidates``
+    (m, 2): one third uniform over the box [``low``, ``high``] (2,) each, two thirds
+    N(c, ``noise_var`` I) around candidates c drawn uniformly (all uniform when m = 0).
+    Returns ``(positions (n, 2), proposal density (n,))``, the density of the mixture the
+    draws come from (the Gaussians cut at 6 sigma, :func:`near_densities`)."""
+    if n < 3:
+        raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
+    m = candidates.shape[0]
+    n_uniform = n if m == 0 else n // 3
+    positions = low + rng.random((n, 2)) * (high - low)
+    proposal = np.full(n, n_uniform / n / np.prod(high - low))
+    if m:
+        chosen = rng.integers(0, m, n - n_uniform)
+        scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
+        positions[n_uniform:] = candidates[chosen] + scatter
+        near_position, _, density = near_densities(positions, candidates, noise_var)
+        proposal += (
+            (n - n_uniform) / n / m * np.bincount(near_position, weights=density, minlength=n)
+        )
+    return positions, proposal
+
+
 def scan_posterior(
     points: np.ndarray,
     sensors: np.ndarray,
@@ -244,20 +275,10 @@ def scan_posterior(
     ``with_log_evidence`` also the log of the weights' mean before normalising times the
     prior's density: log E[LR] under the uniform prior, the scans' evidence against no
     target. None when the scans rule out every drawn position."""
-    if n < 3:
-        raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
-    area, m = spec.area, points.shape[0]
-    n_uniform = n if m == 0 else n // 3
-    positions = rng.random((n, 2)) * area
-    proposal = np.full(n, n_uniform / n / area**2)
-    if m:
-        chosen = rng.integers(0, m, n - n_uniform)
-        scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
-        positions[n_uniform:] = points[chosen] + scatter
-        near_position, _, density = near_densities(positions, points, noise_var)
-        proposal += (
-            (n - n_uniform) / n / m * np.bincount(near_position, weights=density, minlength=n)
-        )
+    area = spec.area
+    positions, proposal = draws_near_candidates(
+        points, np.zeros(2), np.full(2, area), noise_var, n, rng
+    )
     log_weight = area_log_likelihood_ratios(
         positions, points, sensors, spec, noise_var, awake
     ) - np.log(proposal)
@@ -509,6 +530,12 @@ class ClutterScreen:
             return np.zeros(points.shape[0], dtype=bool), False
         self.searching = False
         return start, True
+
+    def track_started(self) -> None:
+        """A track started elsewhere (the tracker's search, :mod:`agents.search`): stop
+        searching and forget the last step's start candidates, as a start here does."""
+        self.searching = False
+        self.candidates = np.empty((0, 3))
 
     def _track_start(self, points, sensors, awake) -> np.ndarray | None:
         """The measurements (boolean (n,)) around the candidate a track starts from, or

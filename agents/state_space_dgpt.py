@@ -979,20 +979,15 @@ class StateSpaceDGPT(TrackerBase):
         if searched is None:
             return keep, started
         mean, var, settled = searched
-        positions = self.search_.states[:, :, 0]
-        kernel_var = kernel_scale(positions.shape[0], dimension=2) * var
-        ucb = agg.mixture_half_width(
-            np.full(positions.shape[0], 1.0 / positions.shape[0]),
-            positions - mean,
-            np.broadcast_to(np.sqrt(kernel_var), positions.shape),
-            self.delta,
+        positions = self.search_.states[:, :, 0]  # resampled: equal weights
+        weights = np.full(positions.shape[0], 1.0 / positions.shape[0])
+        self.search_estimate_ = self._kernel_estimate(
+            mean, var, positions, weights, positions.shape[0]
         )
-        self.search_estimate_ = Estimate(mean, var + kernel_var, ucb)
         if settled:
             near = np.sum((points - mean) ** 2, axis=1) <= 18.0 * self.spec_.model_noise_std**2
             if near.any():
-                self.screen_.searching = False
-                self.screen_.candidates = np.empty((0, 3))
+                self.screen_.track_started()
                 self.search_.reset()
                 self.search_estimate_ = None
                 return near, True
@@ -1021,8 +1016,14 @@ class StateSpaceDGPT(TrackerBase):
         positions, weights = posterior
         mean = weights @ positions
         var = weights @ (positions - mean) ** 2
-        # Silverman's rule on the effective number of the importance-weighted positions
-        kernel_var = kernel_scale(1.0 / np.sum(weights**2), dimension=2) * var
+        return self._kernel_estimate(mean, var, positions, weights, 1.0 / np.sum(weights**2))
+
+    def _kernel_estimate(self, mean, var, positions, weights, effective_number) -> Estimate:
+        """The estimate of a position's weighted sample ``positions`` (N, 2), ``weights``
+        (N,), of moments ``mean`` and ``var`` (2,): the moments of its kernel density, with
+        Gaussian kernels of :func:`agents.particles.kernel_scale` (Silverman's rule in 2-D
+        on ``effective_number``) times ``var``, and the UCB under that density."""
+        kernel_var = kernel_scale(effective_number, dimension=2) * var
         ucb = agg.mixture_half_width(
             weights,
             positions - mean,

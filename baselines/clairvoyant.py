@@ -84,13 +84,17 @@ def realised_singer_parameters(scenario: SingerScenario) -> tuple[float, float]:
     paths drawn from ``scenario`` (seeds :data:`REALISED_MOMENT_PATHS`): rho = lag-one
     correlation, tau = -dt / log rho."""
     accelerations = np.stack(
-        [scenario.sample(np.random.default_rng(seed)).accelerations() for seed in REALISED_MOMENT_PATHS]
+        [
+            scenario.sample(np.random.default_rng(seed)).accelerations()
+            for seed in REALISED_MOMENT_PATHS
+        ]
     )  # (paths, steps, 2)
     centred = accelerations - accelerations.mean(axis=(0, 1))
     variance = float(np.mean(centred**2))
     lag_one = float(np.mean(centred[:, 1:] * centred[:, :-1])) / variance
     rho = min(max(lag_one, 1e-3), 1.0 - 1e-6)
     return -scenario.dt / np.log(rho), float(np.sqrt(variance))
+
 
 NUMERICAL_PROCESS_NOISE = 1e-8
 """Process noise (m^2/s^3 per axis) added to the exact CT model: keeps P positive definite."""
@@ -176,9 +180,7 @@ class ClairvoyantFilter(TrackerBase):
             self.position_index_ = np.array([0, 2])
             self.velocity_index_ = np.array([1, 3])
             if isinstance(scenario, NearlyConstantVelocityScenario):
-                self.process_noise_ = white_acceleration_noise(
-                    dt, scenario.acceleration_noise_std
-                )
+                self.process_noise_ = white_acceleration_noise(dt, scenario.acceleration_noise_std)
             elif isinstance(scenario, CoordinatedTurnScenario):
                 self.process_noise_ = white_acceleration_noise(dt, NUMERICAL_PROCESS_NOISE)
             else:
@@ -250,7 +252,10 @@ class ClairvoyantFilter(TrackerBase):
             if measurements.shape[0]:
                 noise = self.spec_.model_noise_std**2 / measurements.shape[0] * np.eye(2)
                 self.mean_, self.cov_, _, _ = kalman_update(
-                    self.mean_, self.cov_, measurements.mean(axis=0), self.measurement_matrix_,
+                    self.mean_,
+                    self.cov_,
+                    measurements.mean(axis=0),
+                    self.measurement_matrix_,
                     noise,
                 )
         position = self.mean_[self.position_index_].copy()

@@ -110,8 +110,11 @@ def gaussian_log_pdf(points, mean, cov):
     offset = points - mean[..., None, :]
     a, b, d = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
     det = a * d - b * b
-    quad = (d[..., None] * offset[..., 0] ** 2 - 2 * b[..., None] * offset[..., 0] * offset[..., 1]
-            + a[..., None] * offset[..., 1] ** 2) / det[..., None]
+    quad = (
+        d[..., None] * offset[..., 0] ** 2
+        - 2 * b[..., None] * offset[..., 0] * offset[..., 1]
+        + a[..., None] * offset[..., 1] ** 2
+    ) / det[..., None]
     return -0.5 * quad - np.log(2.0 * np.pi) - 0.5 * np.log(det)[..., None]
 
 
@@ -158,7 +161,10 @@ def pda_update(
         return mean, cov, np.full(batch, log_miss)
     # one Kalman update per measurement: broadcast a measurement axis before the state axis
     post_mean, post_cov, predicted, innovation_cov = kalman_update(
-        mean[..., None, :], cov[..., None, :, :], measurements, measurement_matrix,
+        mean[..., None, :],
+        cov[..., None, :, :],
+        measurements,
+        measurement_matrix,
         measurement_noise,
     )
     log_pdf = gaussian_log_pdf(measurements, predicted[..., 0, :], innovation_cov[..., 0, :, :])
@@ -218,7 +224,11 @@ def multi_detection_update(
         new_mean, new_cov, predicted, innovation_cov = kalman_update(
             mean, cov, centroid, measurement_matrix, variance / m * eye
         )
-        return new_mean, new_cov, gaussian_log_pdf(centroid[None], predicted, innovation_cov)[..., 0]
+        return (
+            new_mean,
+            new_cov,
+            gaussian_log_pdf(centroid[None], predicted, innovation_cov)[..., 0],
+        )
     h = measurement_matrix
     log_ratio_scale = np.log(detection_rate) - np.log(clutter_density)
     # Anchors: the Kalman gain and posterior covariance do not depend on the measurement,
@@ -254,8 +264,7 @@ def multi_detection_update(
     total = np.maximum(expected_others, 1e-12)
     weighted = (beta @ measurements) / total[..., None]
     refine_inverse = inverse_2x2(
-        (support_cov - variance * eye)[..., None, :, :]
-        + (variance / total)[..., None, None] * eye
+        (support_cov - variance * eye)[..., None, :, :] + (variance / total)[..., None, None] * eye
     )  # (..., m, 2, 2)
     correction = np.einsum("...akl,...al->...ak", refine_inverse, weighted - anchor_position)
     refined_mean = anchor_mean + correction @ np.swapaxes(anchor_cross, -1, -2)

@@ -175,9 +175,7 @@ class IMMPDAFilter(TrackerBase):
         n_modes = self.turn_rates.size
         centroid = measurements.mean(axis=0)
         mean = np.array([centroid[0], 0.0, centroid[1], 0.0])
-        variances = np.array(
-            [self.initial_position_std, self.initial_velocity_std] * 2
-        ) ** 2
+        variances = np.array([self.initial_position_std, self.initial_velocity_std] * 2) ** 2
         self.means_ = np.repeat(mean[None], n_modes, axis=0)
         self.covs_ = np.repeat(np.diag(variances)[None], n_modes, axis=0)
         stationary = np.full(n_modes, 1.0 / n_modes)

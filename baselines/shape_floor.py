@@ -44,7 +44,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agents.screening import area_log_likelihood_ratios, near_densities
+from agents.screening import area_log_likelihood_ratios, draws_near_candidates
 from dgpt_gym.problem import ProblemSpec
 
 __all__ = ["shape_known_posteriors", "start_box"]
@@ -99,8 +99,6 @@ def shape_known_posteriors(
         )
     if not np.allclose(displacements[0], 0.0):
         raise ValueError(f"displacements[0] must be 0 (d_0 = x_0 - x_0); got {displacements[0]}")
-    if n < 3:
-        raise ValueError(f"n must be at least 3 (a third of the draws are uniform); got {n}")
     low, high = np.zeros(2), np.full(2, float(spec.area))
     if box is not None:
         if len(box) != 2:
@@ -119,20 +117,7 @@ def shape_known_posteriors(
     candidates = candidates[
         np.all((candidates > low - reach) & (candidates < high + reach), axis=1)
     ]
-    n_uniform = n if not candidates.shape[0] else n // 3
-    starts = low + rng.random((n, 2)) * (high - low)
-    proposal = np.full(n, n_uniform / n / np.prod(high - low))
-    if candidates.shape[0]:
-        chosen = rng.integers(0, candidates.shape[0], n - n_uniform)
-        scatter = rng.standard_normal((n - n_uniform, 2)) * np.sqrt(noise_var)
-        starts[n_uniform:] = candidates[chosen] + scatter
-        near_start, _, density = near_densities(starts, candidates, noise_var)
-        proposal += (
-            (n - n_uniform)
-            / n
-            / candidates.shape[0]
-            * np.bincount(near_start, weights=density, minlength=n)
-        )
+    starts, proposal = draws_near_candidates(candidates, low, high, noise_var, n, rng)
     inside = np.all((starts >= low) & (starts <= high), axis=1)
     log_weight = np.where(inside, -np.log(proposal), -np.inf)  # the prior is flat on the box
     means, covs, ess = np.empty((k, 2)), np.empty((k, 2, 2)), np.empty(k)

@@ -64,11 +64,7 @@ def floor_errors(env, seed: int, horizon: int, draws: int) -> tuple[np.ndarray, 
     scans = base.scans_
     horizon = min(horizon, positions.shape[0])
     steps = [
-        (
-            scans.measurements[scans.offsets[t] : scans.offsets[t + 1]],
-            scans.sensor[scans.offsets[t] : scans.offsets[t + 1]],
-        )
-        for t in range(horizon)
+        (scans.measurements[scans.rows(t)], scans.sensor[scans.rows(t)]) for t in range(horizon)
     ]
     displacements = positions[:horizon] - positions[0]
     box = start_box(positions - positions[0], base.scenario.area, base.scenario.boundary_margin)

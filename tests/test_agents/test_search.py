@@ -56,7 +56,7 @@ def test_the_search_settles_on_the_target_under_one_sensor_at_a_time():
         search = SearchFilter(env.problem_spec, 2000, np.random.default_rng(seed), 25, 25, 0.1, 3)
         settled_steps = []
         for step in range(12):
-            rows = slice(scans.offsets[step], scans.offsets[step + 1])
+            rows = scans.rows(step)
             mean, _, settled = search.step(step, scans.measurements[rows], scans.sensor[rows])
             if settled:
                 settled_steps.append(step)
