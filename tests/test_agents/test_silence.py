@@ -286,13 +286,17 @@ def test_particle_moments_by_hand():
 @given(
     weights=st.lists(st.floats(0.0, 1.0), min_size=2, max_size=30).filter(lambda w: sum(w) > 0),
     seed=st.integers(0, 2**32 - 1),
+    draws=st.one_of(st.none(), st.integers(1, 60)),
 )
 @settings(max_examples=60, deadline=None)
-def test_systematic_resampling_keeps_each_particle_floor_or_ceil_of_n_w_times(weights, seed):
+def test_systematic_resampling_keeps_each_particle_floor_or_ceil_of_n_w_times(weights, seed, draws):
+    """N particles resampled to n draws (n = N unless given): each is drawn floor(n w) or
+    ceil(n w) times."""
     weights = np.asarray(weights) / np.sum(weights)
-    n = weights.size
-    counts = np.bincount(resample_systematic(weights, np.random.default_rng(seed)), minlength=n)
-    assert counts.sum() == n
+    n = weights.size if draws is None else draws
+    chosen = resample_systematic(weights, np.random.default_rng(seed), draws)
+    counts = np.bincount(chosen, minlength=weights.size)
+    assert counts.sum() == n and counts.size == weights.size
     assert np.all(counts >= np.floor(n * weights - 1e-9))
     assert np.all(counts <= np.ceil(n * weights + 1e-9))
 
