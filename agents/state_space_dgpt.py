@@ -80,7 +80,9 @@ alone (:meth:`_scan_estimate`) instead of the area's centre. With ``search_parti
 instead, from the first scan on, by :class:`agents.search.SearchFilter`, whose births from
 pairs of points of consecutive steps let the motion tell the target's points from clutter;
 the first track starts where it settles (:meth:`_search`), or where the screen's start
-comes first.
+comes first. With ``gap_birth_probability`` > 0 (the registered trackers since 0.17.0) a gap
+step's particles are joined by births from such pairs too (:meth:`_scan_gap_step`), so that
+a target that reappears away from them is found by its motion.
 
 With ``silence_particles`` and clutter at the detecting sensors only, a coverage gap is
 filtered by particles conditioned on the silence of the awake sensors, and at the gap's end
@@ -105,7 +107,7 @@ from agents import aggregation as agg
 from agents.gating import gate_measurements, target_probabilities
 from agents.particles import kernel_scale, resample_systematic
 from agents.screening import ClutterScreen, area_log_likelihood_ratios, scan_posterior
-from agents.search import SearchFilter
+from agents.search import SearchFilter, pair_births
 from agents.silence import (
     draw_particles,
     particle_moments,
@@ -409,6 +411,10 @@ class StateSpaceDGPT(TrackerBase):
             the first track starts (:data:`SEARCH`).
         search_birth_probability: the search's prior probability per step of a target
             somewhere new, in (0, 1) (:data:`SEARCH`).
+        gap_birth_probability: with clutter at every sensor and ``silence_particles``: the
+            prior probability per gap step that the target is somewhere new, whose particles
+            are born from pairs of points of consecutive steps (:meth:`_scan_gap_step`), in
+            [0, 1); 0 (the default) turns the births off.
     """
 
     name = "dgpt-bcm"
@@ -436,6 +442,7 @@ class StateSpaceDGPT(TrackerBase):
         search_particles: int = 0,
         search_settle_std: float = SEARCH["settle_std"],
         search_birth_probability: float = SEARCH["birth_probability"],
+        gap_birth_probability: float = 0.0,
     ) -> None:
         self.aggregation = check_choice("aggregation", aggregation, agg.AGGREGATIONS)
         self.window = check_integer("window", window, low=1)
@@ -496,6 +503,13 @@ class StateSpaceDGPT(TrackerBase):
             low_inclusive=False,
             high_inclusive=False,
         )
+        self.gap_birth_probability = check_real(
+            "gap_birth_probability",
+            gap_birth_probability,
+            low=0.0,
+            high=1.0,
+            high_inclusive=False,
+        )
         try:
             rates = tuple(turn_rates)
         except TypeError:
@@ -537,6 +551,9 @@ class StateSpaceDGPT(TrackerBase):
                 self.search_settle_std,
             )
         self.search_estimate_ = None
+        # with clutter at every sensor: the last two steps' scans, (points, sensors, awake,
+        # step) each, for the births of a gap's particles
+        self.previous_scan_ = self.last_scan_ = None
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
@@ -563,6 +580,9 @@ class StateSpaceDGPT(TrackerBase):
         self.data_mean_ = self.data_cov_ = None  # broadcast posterior after the last data step
         self.data_step_ = 0
         self.particles_ = None  # (states (N, 2, 2), weights (N,), modes (N,) or None) in a gap
+        # with clutter at every sensor, log p(Z_t | Z_..t-1) of the gap's last step; None
+        # outside a gap and when that step's scans ruled out every particle
+        self.gap_evidence_: float | None = None
         # the covariance of the broadcast posterior mean's error minus the posterior's
         # (2, 2, 2): None when not carried (_carries_error_excess) and at a track's start
         self.error_excess_: np.ndarray | None = None
@@ -641,6 +661,8 @@ class StateSpaceDGPT(TrackerBase):
         scan = None  # with clutter at every sensor: every report of the step
         if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
             scan = (points, sensors)
+            self.previous_scan_ = self.last_scan_
+            self.last_scan_ = (points, sensors, obs.get("awake"), step)
             keep, started = self.screen_.screen(
                 points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
             )
@@ -663,6 +685,7 @@ class StateSpaceDGPT(TrackerBase):
         if self.particles_ is not None and self.gap_end == "reports" and scan is None:
             gap_predictions = self._reporting_predictions(step, sensors, obs.get("awake"))
         self.particles_ = None  # a gap ends; its last step kept the particles' moments
+        self.gap_evidence_ = None
         if self.mean_ is None:
             if not points.shape[0]:
                 self.last_estimate_ = Estimate.uninformed(spec)
@@ -794,15 +817,20 @@ class StateSpaceDGPT(TrackerBase):
         sensor_positions = np.asarray(spec.sensor_positions)
         if awake is not None:
             sensor_positions = sensor_positions[np.asarray(awake, dtype=bool)]
-        if scan is None:
-            likelihood = silent_region(
-                states[..., 0], sensor_positions, spec.sensing_range, spec.area
+        if scan is not None and self.gap_birth_probability > 0:
+            states, weights, modes, kernel_cov = self._scan_gap_step(
+                step, states, weights, modes, kernel_cov, scan, awake
             )
         else:
-            likelihood = self._scan_likelihood(states[..., 0], *scan, awake)
-        if np.any((likelihood > 0) & (weights > 0)):
-            weights = weights * likelihood
-            weights = weights / weights.sum()
+            if scan is None:
+                likelihood = silent_region(
+                    states[..., 0], sensor_positions, spec.sensing_range, spec.area
+                )
+            else:
+                likelihood = self._scan_likelihood(states[..., 0], *scan, awake)
+            if np.any((likelihood > 0) & (weights > 0)):
+                weights = weights * likelihood
+                weights = weights / weights.sum()
         if 1.0 / np.sum(weights**2) < weights.size / 2:
             chosen = resample_systematic(weights, self.rng_)
             states = states[chosen]
@@ -817,6 +845,85 @@ class StateSpaceDGPT(TrackerBase):
             self.delta,
         )
         return self._keep(step, mean, cov, ucb, mode_states)
+
+    def _scan_gap_step(self, step, states, weights, modes, kernel_cov, scan, awake):
+        """The weights of a gap step's particles with clutter at every sensor and
+        ``gap_birth_probability`` = beta > 0: the filter of :class:`agents.search.SearchFilter`
+        started from the gap's particles instead of the uniform prior. With probability
+        1 - beta per step the target is where the particles carry it, weighed by the step's
+        scans (:func:`agents.screening.area_log_likelihood_ratios`); with beta it is somewhere
+        new, drawn from pairs of points of this step and the last
+        (:func:`agents.search.pair_births`, ``silence_particles`` / 2 of them, in the
+        no-turn mode) and weighed by both steps' scans over the last step's evidence, so that
+        a target that reappears away from the particles (a waypoint turn inside a coverage
+        gap) is found where its points move as a target can, not only by a new track that a
+        second sensor confirms. Births start on a gap's second step (they need the evidence
+        of the gap's last step); with births the particles are then resampled to
+        ``silence_particles`` and their kernels are recomputed. If the scans rule out every
+        particle and birth the weights stay as they were (as in :meth:`_silent_step`).
+        Returns ``(states, weights, modes, kernel_cov)``."""
+        spec, beta = self.spec_, self.gap_birth_probability
+        points, sensors = scan
+        with np.errstate(divide="ignore"):
+            log_weight = (
+                np.log(weights)
+                + np.log1p(-beta)
+                + area_log_likelihood_ratios(
+                    states[..., 0], points, sensors, spec, self.noise_var_, awake
+                )
+            )
+        born = None
+        if self.gap_evidence_ is not None and self.previous_scan_ is not None:
+            previous_points, previous_sensors, previous_awake, previous_step = self.previous_scan_
+            dt = (step - previous_step) * spec.dt
+            born = pair_births(
+                previous_points,
+                points,
+                self.noise_var_,
+                dt,
+                INITIAL_SPEED_STD,
+                spec.area,
+                self.silence_particles // 2,
+                self.rng_,
+            )
+        all_states, all_modes = states, modes
+        if born is not None:
+            born_states, log_ratio = born
+            log_born = (
+                np.log(beta)
+                + log_ratio
+                + area_log_likelihood_ratios(
+                    born_states[..., 0], points, sensors, spec, self.noise_var_, awake
+                )
+                + area_log_likelihood_ratios(
+                    born_states[..., 0] - dt * born_states[..., 1],
+                    previous_points,
+                    previous_sensors,
+                    spec,
+                    self.noise_var_,
+                    previous_awake,
+                )
+                - self.gap_evidence_
+            )
+            all_states = np.concatenate([states, born_states])
+            log_weight = np.concatenate([log_weight, log_born])
+            if modes is not None:
+                all_modes = np.concatenate([modes, np.zeros(born_states.shape[0], dtype=int)])
+        top = np.max(log_weight)
+        if not np.isfinite(top):
+            self.gap_evidence_ = None
+            return states, weights, modes, kernel_cov
+        new_weights = np.exp(log_weight - top)
+        self.gap_evidence_ = float(top + np.log(new_weights.sum()))
+        new_weights /= new_weights.sum()
+        if born is None:
+            return states, new_weights, modes, kernel_cov
+        chosen = resample_systematic(new_weights, self.rng_, self.silence_particles)
+        states = all_states[chosen]
+        modes = None if all_modes is None else all_modes[chosen]
+        weights = np.full(states.shape[0], 1.0 / states.shape[0])
+        kernel_cov = kernel_scale(weights.size) * particle_moments(states, weights)[1]
+        return states, weights, modes, kernel_cov
 
     def _reporting_predictions(self, step: int, sensors, awake):
         """The step's predictions at the end of a coverage gap (``gap_end="reports"``,

@@ -284,6 +284,18 @@ CANDIDATES = {
         for settle in (1.5, 3.0, 6.0)
         for birth in (0.05, 0.1, 0.3)
     },
+    **{
+        f"ss-rbcm-silence-1000-search-3-0.1-gap-{birth:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "search_particles": 2000,
+                "gap_birth_probability": birth,
+            },
+        )
+        for birth in (0.003, 0.01, 0.03, 0.1, 0.3)
+    },
     "ss-rbcm-silence-1000-moments": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "silence_particles": 1000, "gap_end": "moments"},

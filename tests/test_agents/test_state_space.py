@@ -739,6 +739,8 @@ def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
         ({"search_particles": 5}, "search_particles"),
         ({"search_settle_std": 0.0}, "search_settle_std"),
         ({"search_birth_probability": 1.0}, "search_birth_probability"),
+        ({"gap_birth_probability": 1.0}, "gap_birth_probability"),
+        ({"gap_birth_probability": -0.1}, "gap_birth_probability"),
     ],
 )
 def test_bad_arguments_name_themselves(kwargs, name):
