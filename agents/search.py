@@ -36,7 +36,7 @@ from agents.screening import MAX_TARGET_SPEED, area_log_likelihood_ratios, scan_
 from agents.silence import propagate_particles
 from dgpt_gym.problem import ProblemSpec
 
-__all__ = ["SearchFilter", "pair_births"]
+__all__ = ["SearchFilter", "pair_births", "weighed_births"]
 
 
 def pair_births(
@@ -93,6 +93,51 @@ def pair_births(
         - np.log(2.0 * np.pi * speed_std**2)
     )
     return np.stack([position, velocity], axis=2), log_prior - log_proposal - np.log(n)
+
+
+def weighed_births(
+    previous_scan,
+    scan,
+    spec: ProblemSpec,
+    noise_var: float,
+    dt: float,
+    speed_std: float,
+    n: int,
+    rng: np.random.Generator,
+    birth_probability: float,
+    last_log_evidence: float,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``n`` births of a new target (:func:`pair_births`) from the pairs of points of the
+    last step's ``previous_scan`` and this step's ``scan`` ((points, sensors, awake) each,
+    ``dt`` seconds apart), with their log weights on the scale of a particle filter whose
+    particles carry log(1 - beta) plus this step's scan log likelihood ratio: log beta (beta
+    = ``birth_probability``) plus the births' log prior over proposal, plus both steps' scan
+    log likelihood ratios (:func:`agents.screening.area_log_likelihood_ratios`; the last
+    step's at the position moved back by dt v), minus ``last_log_evidence``, the filter's
+    log p(Z_t-1 | Z_..t-2): a target born at the last step has the probability beta
+    p(Z_t-1, Z_t | new) / p(Z_t-1 | Z_..t-2) relative to the particles' p(Z_t | x). Returns
+    ``(states (n, 2, 2), log_weights (n,))``, or None without a pair."""
+    points, sensors, awake = scan
+    previous_points, previous_sensors, previous_awake = previous_scan
+    born = pair_births(previous_points, points, noise_var, dt, speed_std, spec.area, n, rng)
+    if born is None:
+        return None
+    states, log_ratio = born
+    log_weights = (
+        np.log(birth_probability)
+        + log_ratio
+        + area_log_likelihood_ratios(states[..., 0], points, sensors, spec, noise_var, awake)
+        + area_log_likelihood_ratios(
+            states[..., 0] - dt * states[..., 1],
+            previous_points,
+            previous_sensors,
+            spec,
+            noise_var,
+            previous_awake,
+        )
+        - last_log_evidence
+    )
+    return states, log_weights
 
 
 class SearchFilter:
@@ -159,38 +204,20 @@ class SearchFilter:
             log_weight = np.log1p(-self.birth_probability) + area_log_likelihood_ratios(
                 states[..., 0], points, sensors, spec, self.noise_var, awake
             )
-            previous_points, previous_sensors, previous_awake = self.previous
-            born = pair_births(
-                previous_points,
-                points,
+            born = weighed_births(
+                self.previous,
+                (points, sensors, awake),
+                spec,
                 self.noise_var,
                 dt,
                 self.speed_std,
-                spec.area,
                 self.n // 2,
                 rng,
+                self.birth_probability,
+                self.log_evidence,
             )
             if born is not None:
-                born_states, log_ratio = born
-                # both steps' scans weigh a new target; the last step's evidence of the
-                # particles' normaliser puts them on one scale (p(Z_t | Z_..t-1) for the
-                # particles, p(Z_t-1, Z_t) / p(Z_t-1 | Z_..t-2) for the births)
-                log_born = (
-                    np.log(self.birth_probability)
-                    + log_ratio
-                    + area_log_likelihood_ratios(
-                        born_states[..., 0], points, sensors, spec, self.noise_var, awake
-                    )
-                    + area_log_likelihood_ratios(
-                        born_states[..., 0] - dt * born_states[..., 1],
-                        previous_points,
-                        previous_sensors,
-                        spec,
-                        self.noise_var,
-                        previous_awake,
-                    )
-                    - self.log_evidence
-                )
+                born_states, log_born = born
                 states = np.concatenate([states, born_states])
                 log_weight = np.concatenate([log_weight + np.log(1.0 / self.n), log_born])
             else:

@@ -107,7 +107,7 @@ from agents import aggregation as agg
 from agents.gating import gate_measurements, target_probabilities
 from agents.particles import kernel_scale, resample_systematic
 from agents.screening import ClutterScreen, area_log_likelihood_ratios, scan_posterior
-from agents.search import SearchFilter, pair_births
+from agents.search import SearchFilter, weighed_births
 from agents.silence import (
     draw_particles,
     particle_moments,
@@ -553,7 +553,7 @@ class StateSpaceDGPT(TrackerBase):
         self.search_estimate_ = None
         # with clutter at every sensor: the last two steps' scans, (points, sensors, awake,
         # step) each, for the births of a gap's particles
-        self.previous_scan_ = self.last_scan_ = None
+        self.previous_scan_ = self.this_scan_ = None
         self.prior_next_ = None  # (mean, var) (2,) of the position at the next step
         self.next_state_ = None  # (mean (2, 2), cov (2, 2, 2)) of the state at the next step
         self.prior_state_ = None  # the same, made at the last step for this one
@@ -661,8 +661,9 @@ class StateSpaceDGPT(TrackerBase):
         scan = None  # with clutter at every sensor: every report of the step
         if spec.clutter_sensors == "all" and spec.clutter_rate > 0:
             scan = (points, sensors)
-            self.previous_scan_ = self.last_scan_
-            self.last_scan_ = (points, sensors, obs.get("awake"), step)
+            awake = obs.get("awake")
+            awake = None if awake is None else np.array(awake, dtype=bool)
+            self.previous_scan_, self.this_scan_ = self.this_scan_, (points, sensors, awake, step)
             keep, started = self.screen_.screen(
                 points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
             )
@@ -789,9 +790,11 @@ class StateSpaceDGPT(TrackerBase):
         effective number falls below half. With clutter at every sensor, ``scan`` = (points,
         sensors) holds every report of a step on which the screen admitted no sensor, and
         the weights are the scans' likelihood ratio instead (:meth:`_scan_likelihood`),
-        which is that indicator when nothing is reported. The estimate is the moments of
-        their kernel density: Gaussian kernels of covariance
-        :func:`agents.particles.kernel_scale` times the predicted particles' covariance
+        which is that indicator when nothing is reported; with ``gap_birth_probability``
+        > 0, births from pairs of points join them (:meth:`_scan_gap_step`). The estimate is
+        the moments of their kernel density: Gaussian kernels of covariance
+        :func:`agents.particles.kernel_scale` times the predicted particles' covariance (the
+        resampled particles' after births)
         (Silverman's bandwidth), so that a few surviving particles do not report a variance
         near zero. The resampled particles are not jittered with those kernels: on training
         seeds 1000-1011 that drifted tracks (RMSE on the reference paths 2.15 m above
@@ -814,15 +817,15 @@ class StateSpaceDGPT(TrackerBase):
         without the silence 99.7 %."""
         spec = self.spec_
         states, weights, modes, kernel_cov = self._advance_particles(step)
-        sensor_positions = np.asarray(spec.sensor_positions)
-        if awake is not None:
-            sensor_positions = sensor_positions[np.asarray(awake, dtype=bool)]
         if scan is not None and self.gap_birth_probability > 0:
             states, weights, modes, kernel_cov = self._scan_gap_step(
                 step, states, weights, modes, kernel_cov, scan, awake
             )
         else:
             if scan is None:
+                sensor_positions = np.asarray(spec.sensor_positions)
+                if awake is not None:
+                    sensor_positions = sensor_positions[np.asarray(awake, dtype=bool)]
                 likelihood = silent_region(
                     states[..., 0], sensor_positions, spec.sensing_range, spec.area
                 )
@@ -852,16 +855,24 @@ class StateSpaceDGPT(TrackerBase):
         started from the gap's particles instead of the uniform prior. With probability
         1 - beta per step the target is where the particles carry it, weighed by the step's
         scans (:func:`agents.screening.area_log_likelihood_ratios`); with beta it is somewhere
-        new, drawn from pairs of points of this step and the last
-        (:func:`agents.search.pair_births`, ``silence_particles`` / 2 of them, in the
-        no-turn mode) and weighed by both steps' scans over the last step's evidence, so that
-        a target that reappears away from the particles (a waypoint turn inside a coverage
-        gap) is found where its points move as a target can, not only by a new track that a
-        second sensor confirms. Births start on a gap's second step (they need the evidence
-        of the gap's last step); with births the particles are then resampled to
-        ``silence_particles`` and their kernels are recomputed. If the scans rule out every
-        particle and birth the weights stay as they were (as in :meth:`_silent_step`).
-        Returns ``(states, weights, modes, kernel_cov)``."""
+        new. Born at the last step, it is drawn from pairs of points of that step and this one
+        (:func:`agents.search.weighed_births`, ``silence_particles`` / 2 births in the no-turn
+        mode, which the pair's velocity stands for) and weighed by both steps' scans over the
+        last step's evidence, so that a target that reappears away from the particles (a
+        waypoint turn inside a coverage gap) is found where its points move as a target can,
+        not only by a new track that a second sensor confirms. With births the particles are
+        resampled to ``silence_particles`` and their kernels are those of the resampled
+        particles. If the scans rule out every particle and birth the weights stay as they
+        were (as in :meth:`_silent_step`).
+
+        The step's log evidence ``gap_evidence_``, which the next step's births divide by,
+        is that of the particles and births plus beta times that of a target new at this
+        step, uniform over the area (:func:`agents.screening.scan_posterior`'s, from
+        ``silence_particles`` / 2 draws): it stays finite when the scans rule out every
+        particle (the search filter restarts there instead), so that the births of the next
+        step can find the target; it is None only if the scans rule out the whole area.
+        Births therefore start on a gap's second step. Returns ``(states, weights, modes,
+        kernel_cov)``."""
         spec, beta = self.spec_, self.gap_birth_probability
         points, sensors = scan
         with np.errstate(divide="ignore"):
@@ -874,47 +885,43 @@ class StateSpaceDGPT(TrackerBase):
             )
         born = None
         if self.gap_evidence_ is not None and self.previous_scan_ is not None:
-            previous_points, previous_sensors, previous_awake, previous_step = self.previous_scan_
-            dt = (step - previous_step) * spec.dt
-            born = pair_births(
-                previous_points,
-                points,
+            *previous_scan, previous_step = self.previous_scan_
+            born = weighed_births(
+                previous_scan,
+                (points, sensors, awake),
+                spec,
                 self.noise_var_,
-                dt,
+                (step - previous_step) * spec.dt,
                 INITIAL_SPEED_STD,
-                spec.area,
                 self.silence_particles // 2,
                 self.rng_,
+                beta,
+                self.gap_evidence_,
             )
         all_states, all_modes = states, modes
         if born is not None:
-            born_states, log_ratio = born
-            log_born = (
-                np.log(beta)
-                + log_ratio
-                + area_log_likelihood_ratios(
-                    born_states[..., 0], points, sensors, spec, self.noise_var_, awake
-                )
-                + area_log_likelihood_ratios(
-                    born_states[..., 0] - dt * born_states[..., 1],
-                    previous_points,
-                    previous_sensors,
-                    spec,
-                    self.noise_var_,
-                    previous_awake,
-                )
-                - self.gap_evidence_
-            )
+            born_states, log_born = born
             all_states = np.concatenate([states, born_states])
             log_weight = np.concatenate([log_weight, log_born])
             if modes is not None:
                 all_modes = np.concatenate([modes, np.zeros(born_states.shape[0], dtype=int)])
+        new_target = scan_posterior(
+            points,
+            sensors,
+            spec,
+            self.noise_var_,
+            self.silence_particles // 2,
+            self.rng_,
+            awake,
+            with_log_evidence=True,
+        )
+        log_new = -np.inf if new_target is None else np.log(beta) + new_target[2]
         top = np.max(log_weight)
         if not np.isfinite(top):
-            self.gap_evidence_ = None
+            self.gap_evidence_ = float(log_new) if np.isfinite(log_new) else None
             return states, weights, modes, kernel_cov
         new_weights = np.exp(log_weight - top)
-        self.gap_evidence_ = float(top + np.log(new_weights.sum()))
+        self.gap_evidence_ = float(np.logaddexp(top + np.log(new_weights.sum()), log_new))
         new_weights /= new_weights.sum()
         if born is None:
             return states, new_weights, modes, kernel_cov

@@ -72,6 +72,15 @@ CANDIDATES = {
         )
         for probability in (0.02, 0.1)
     },
+    "hybrid-ncv-silence-1000-search-3-0.1-gap-0.03": (
+        "agents.hybrid:HybridFilter",
+        {
+            "gp": "ncv",
+            "silence_particles": 1000,
+            "search_particles": 2000,
+            "gap_birth_probability": 0.03,
+        },
+    ),
     "hybrid-ncv-silence-1000-moments": (
         "agents.hybrid:HybridFilter",
         {"gp": "ncv", "silence_particles": 1000, "gap_end": "moments"},
@@ -294,7 +303,7 @@ CANDIDATES = {
                 "gap_birth_probability": birth,
             },
         )
-        for birth in (0.003, 0.01, 0.03, 0.1, 0.3)
+        for birth in (0.0003, 0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
     },
     "ss-rbcm-silence-1000-moments": (
         "agents.state_space_dgpt:StateSpaceDGPT",

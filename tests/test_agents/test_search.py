@@ -117,12 +117,15 @@ def test_the_tracker_starts_from_the_settled_search_before_the_screens_start():
 
 def two_scan_scene():
     """One sensor at the centre of a 400 m area, range 60 m, clutter rate 0.1, reporting a
-    point at step 4 and one at step 5, a target's move apart; and I, a new target's marginal
-    likelihood of the two scans near that pair: its position uniform over the area and its
-    velocity N(0, s^2 I) (s = 25 m/s) against both steps' likelihood ratios, by a dense grid
-    over the position x at step 5 and u = x - v dt at step 4 (dt = 1, so dv = du). What
-    births cannot stand for (a new target silent at both steps, or arriving from outside the
-    disc faster than 59 m/s) is below 0.3 % of I here."""
+    point at step 4 and one at step 5, a target's move apart. Returns the spec, the two
+    points, their sensors, and by a dense grid the integrals of a new target's likelihood
+    ratios near the points: ``near_pair``, I = the marginal likelihood of both scans for a
+    target new at step 4 near the pair (position uniform over the area, velocity
+    N(0, s^2 I), s = 25 m/s; over x at step 5 and u = x - v dt at step 4, dt = 1, so
+    dv = du), which is what births from the pair stand for (a new target silent at both
+    steps, outside the disc, adds another 12 % of I that they do not); and ``near_point``,
+    the integral of step 5's likelihood ratio over positions within 6 sigma of its point
+    (the ratio is 0 elsewhere in the disc and 1 outside it)."""
     from agents.screening import area_log_likelihood_ratios
 
     spec = problem_spec(
@@ -138,54 +141,126 @@ def two_scan_scene():
     )
     velocity = (current + grid)[:, None, :] - (previous + grid)[None, :, :]
     velocity_density = stats.multivariate_normal([0, 0], 25.0**2).pdf(velocity)
-    dense = (ratio_now[:, None] * ratio_before[None, :] * velocity_density).sum() * 0.25**4
-    return spec, previous, current, sensors, dense / spec.area**2
+    near_pair = (ratio_now[:, None] * ratio_before[None, :] * velocity_density).sum() * 0.25**4
+    near_point = ratio_now.sum() * 0.25**2
+    return spec, previous, current, sensors, near_pair / spec.area**2, near_point
 
 
-def assert_births_share(states, beta, previous, current, n):
+def assert_births_share(states, beta, previous, current):
     """The resampled states near the pair are the births: their share is the births'
-    posterior probability, an importance-sampling estimate from n / 2 births whose weights
-    vary by a few tens of percent (an error of about 1 % of beta) plus the resampling's
-    1 / n."""
+    posterior probability. It is an importance-sampling estimate from n / 2 = 20000 births
+    whose weights are heavy-tailed (the proposal's position and velocity are independent
+    where the target's are correlated): over 20 random streams of the search filter the
+    share had mean 0.2000 and standard deviation 0.0032 at beta = 0.2, the largest error
+    +0.013. 0.02 is six standard deviations, and the (1 - beta) factor dropped moves the
+    share by 0.033; resampling adds 1 / n. Their mean velocity is the pair's, b - a, to
+    within 0.6 m/s (over the same streams: standard deviation 0.05 and 0.10 m/s per axis,
+    largest error 0.41)."""
     born = np.linalg.norm(states[:, :, 0] - current[0], axis=1) < 10.0
-    assert born.mean() == pytest.approx(beta, abs=0.01)
-    np.testing.assert_allclose(states[born, :, 1].mean(axis=0), current[0] - previous[0], atol=0.2)
+    assert born.mean() == pytest.approx(beta, abs=0.02)
+    np.testing.assert_allclose(states[born, :, 1].mean(axis=0), current[0] - previous[0], atol=0.6)
 
 
 def test_gap_births_take_the_share_of_the_new_target_hypothesis():
     """A gap step with clutter at every sensor: the gap's particles lie where no sensor
     covers them (scan likelihood ratio 1). With prior probability beta of a new target, the
     births' share of the posterior is beta I e^-E / ((1 - beta) + beta I e^-E), with I of
-    :func:`two_scan_scene` and E the gap's last log evidence; with E = log I it is beta."""
+    :func:`two_scan_scene` and E the gap's last log evidence; with E = log I it is beta.
+    The step's own evidence is then log(1 + beta J): the particles' and births' normaliser
+    (1 - beta + beta = 1) plus beta times that of a target new at step 5, uniform over the
+    area, J = (the integral near the point + the area outside the disc) / A^2 (an
+    importance-sampling estimate from 20000 draws: over 10 random streams its log was within
+    0.004 of log(1 + beta J), and in the next test of log(beta J))."""
     from agents.state_space_dgpt import INITIAL_SPEED_STD, StateSpaceDGPT
 
     assert INITIAL_SPEED_STD == 25.0  # the scene's velocity prior
-    spec, previous, current, sensors, dense = two_scan_scene()
-    beta, n = 0.2, 4000
+    spec, previous, current, sensors, near_pair, near_point = two_scan_scene()
+    beta, n = 0.2, 40000
     tracker = StateSpaceDGPT(aggregation="rbcm", silence_particles=n, gap_birth_probability=beta)
     tracker.reset(spec, seed=0)
     tracker.previous_scan_ = (previous, sensors, None, 4)
-    tracker.gap_evidence_ = np.log(dense)
+    tracker.gap_evidence_ = np.log(near_pair)
     states = np.zeros((n, 2, 2))
     states[:, :, 0] = 330.0
     states, weights, modes, _ = tracker._scan_gap_step(
         5, states, np.full(n, 1.0 / n), None, np.zeros((2, 2, 2)), (current, sensors), None
     )
-    assert_births_share(states, beta, previous, current, n)
+    assert_births_share(states, beta, previous, current)
     assert modes is None and np.all(weights == 1.0 / n)
+    new_target = (near_point + spec.area**2 - np.pi * 60.0**2) / spec.area**2
+    assert tracker.gap_evidence_ == pytest.approx(np.log1p(beta * new_target), abs=0.01)
+
+
+def test_a_gap_step_that_rules_out_every_particle_keeps_births_possible():
+    """The gap's particles lie in the disc of a sensor that reports nothing near them, so
+    the scans rule them all out: their weights stay as they were, and the step's evidence is
+    that of a target new there, log(beta J), so that the next step can draw births."""
+    from agents.state_space_dgpt import StateSpaceDGPT
+
+    spec, previous, current, sensors, _, near_point = two_scan_scene()
+    beta, n = 0.2, 40000
+    tracker = StateSpaceDGPT(aggregation="rbcm", silence_particles=n, gap_birth_probability=beta)
+    tracker.reset(spec, seed=0)
+    states = np.zeros((n, 2, 2))
+    states[:, :, 0] = 230.0  # inside the disc, 30 m from the point
+    weights = np.full(n, 1.0 / n)
+    kept, kept_weights, _, _ = tracker._scan_gap_step(
+        5, states, weights, None, np.zeros((2, 2, 2)), (current, sensors), None
+    )
+    assert kept is states and kept_weights is weights
+    new_target = (near_point + spec.area**2 - np.pi * 60.0**2) / spec.area**2
+    assert tracker.gap_evidence_ == pytest.approx(np.log(beta * new_target), abs=0.02)
 
 
 def test_the_search_weighs_its_births_against_its_particles():
-    """The same for :class:`SearchFilter` after its first step: particles outside the disc,
-    the last step's evidence E = log I, births' share beta."""
-    spec, previous, current, sensors, dense = two_scan_scene()
-    beta, n = 0.2, 4000
+    """The same share for :class:`SearchFilter` after its first step: particles outside the
+    disc, the last step's evidence E = log I, births' share beta."""
+    spec, previous, current, sensors, near_pair, _ = two_scan_scene()
+    beta, n = 0.2, 40000
     search = SearchFilter(spec, n, np.random.default_rng(0), 25.0, 25.0, beta, 3.0)
     search.states = np.zeros((n, 2, 2))
     search.states[:, :, 0] = 330.0
-    search.previous, search.log_evidence, search.last_step = (previous, sensors, None), np.log(dense), 4
+    search.previous, search.log_evidence, search.last_step = (previous, sensors, None), np.log(
+        near_pair
+    ), 4
     search.step(5, current, sensors)
-    assert_births_share(search.states, beta, previous, current, n)
+    assert_births_share(search.states, beta, previous, current)
+
+
+def test_gap_births_come_only_after_a_gap_step_and_the_evidence_ends_with_the_gap(monkeypatch):
+    """Through whole steps (training seed 1000 of S1's reference path, clutter at every
+    sensor): births are drawn only on a step whose previous step was a gap step with an
+    evidence, and a step with data ends the gap's evidence."""
+    import agents.state_space_dgpt as module
+
+    drawn_at = []
+    original = module.weighed_births
+
+    def spy(*args, **kwargs):
+        drawn_at.append(current_step[0])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, "weighed_births", spy)
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1, clutter_sensors="all")
+    observation, info = env.reset(seed=1000)
+    tracker = module.StateSpaceDGPT(
+        aggregation="rbcm",
+        silence_particles=1000,
+        search_particles=2000,
+        gap_birth_probability=GAP_BIRTH_PROBABILITY,
+    )
+    tracker.reset(info["problem_spec"], seed=1000)
+    current_step, evidence_after = [0], {}
+    for step in range(60):
+        current_step[0] = step
+        estimate = tracker.update(observation)
+        in_gap = tracker.particles_ is not None
+        evidence_after[step] = tracker.gap_evidence_ if in_gap else None
+        if not in_gap:
+            assert tracker.gap_evidence_ is None, step
+        observation, *_ = env.step(estimate.mean)
+    assert drawn_at
+    assert all(evidence_after[step - 1] is not None for step in drawn_at), drawn_at
 
 
 def test_gap_births_find_a_target_that_turned_inside_a_coverage_gap():
@@ -193,7 +268,7 @@ def test_gap_births_find_a_target_that_turned_inside_a_coverage_gap():
     "0.16.0"): the target turns at a waypoint inside a gap at step 48 and reappears under
     one sensor, 44 m from the gap's particles. Without births the particles move away from
     it and the track comes back only at step 57, by a new start that a second sensor
-    confirms; with the registered births it is back within 3 m at step 51."""
+    confirms; with the registered births it is back within 5 m from step 50 on."""
     from agents.state_space_dgpt import StateSpaceDGPT
 
     def errors(gap_birth_probability):
@@ -215,4 +290,4 @@ def test_gap_births_find_a_target_that_turned_inside_a_coverage_gap():
 
     without, with_births = errors(0.0), errors(GAP_BIRTH_PROBABILITY)
     assert np.all(without[51:57] > 100.0) and without[57] < 3.0
-    assert np.all(with_births[51:60] < 3.0)
+    assert np.all(with_births[50:60] < 5.0)
