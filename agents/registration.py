@@ -50,19 +50,18 @@ scripts/model_study.py --first-seed 1000 --seeds 12 --clutter-rates 1 --clutter-
 m to 35.4 / 35.6 m on the reference / random paths (paired -8.2 +- 8.9 / -8.7 +- 7.3 m);
 seeds 1012-1023: -12.4 +- 8.2 / -12.3 +- 12.2 m."""
 
-GAP_BIRTH_PROBABILITY = 0.03
+GAP_BIRTH_PROBABILITY = 0.003
 """The prior probability per gap step that the target is somewhere new, with clutter at
 every sensor (``StateSpaceDGPT(gap_birth_probability=...)``: particles born from pairs of
 points of consecutive steps join the gap's particles; since 0.17.0 in every registered
 ``dgpt-*`` and ``gp``). Chosen on training seeds 1000-1023 (S1-S4, both path modes, clutter
-rate 1; ``python scripts/model_study.py --first-seed 1000 --seeds 12 --clutter-rates 1
+rate 1; ``python scripts/model_study.py --first-seed 1000 --seeds 24 --clutter-rates 1
 --clutter-sensors all --candidates ss-rbcm-silence-1000-search-3-0.1
-ss-rbcm-silence-1000-search-3-0.1-gap-{0.01,0.03,0.1,0.3} --paired-against
-ss-rbcm-silence-1000-search-3-0.1``, and ``--first-seed 1012`` with 0.003, 0.01 and 0.03)
-by the mean RMSE over both path modes: 29.0 m for 0.03, 29.8 m for 0.01, against 35.9 m
-without births; on seeds 1000-1011 0.1 and 0.3 were worse (34.0 and 40.5 m). Paired against
-no births, 0.03 was -9.9 +- 7.7 / -2.7 +- 4.7 m on the reference / random paths on seeds
-1000-1011 and -6.5 +- 8.2 / -8.2 +- 9.3 m on seeds 1012-1023."""
+ss-rbcm-silence-1000-search-3-0.1-gap-<p> --paired-against
+ss-rbcm-silence-1000-search-3-0.1``) by the mean RMSE over both path modes: 28.9 m for
+0.003, against 32.3, 29.4, 29.6, 30.8 and 34.5 m for 0.0003, 0.001, 0.01, 0.03 and 0.1, and
+35.9 m without births. Paired against no births, 0.003 was -8.4 +- 5.1 / -5.6 +- 4.4 m on
+the reference / random paths."""
 
 SEARCHING = {
     "silence_particles": SILENCE_PARTICLES,
