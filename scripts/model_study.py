@@ -72,13 +72,13 @@ CANDIDATES = {
         )
         for probability in (0.02, 0.1)
     },
-    "hybrid-ncv-silence-1000-search-3-0.1-gap-0.03": (
+    "hybrid-ncv-silence-1000-search-3-0.1-gap-0.003": (
         "agents.hybrid:HybridFilter",
         {
             "gp": "ncv",
             "silence_particles": 1000,
             "search_particles": 2000,
-            "gap_birth_probability": 0.03,
+            "gap_birth_probability": 0.003,
         },
     ),
     "hybrid-ncv-silence-1000-moments": (
