@@ -580,8 +580,8 @@ class StateSpaceDGPT(TrackerBase):
         self.data_mean_ = self.data_cov_ = None  # broadcast posterior after the last data step
         self.data_step_ = 0
         self.particles_ = None  # (states (N, 2, 2), weights (N,), modes (N,) or None) in a gap
-        # with clutter at every sensor, log p(Z_t | Z_..t-1) of the gap's last step; None
-        # outside a gap and when that step's scans ruled out every particle
+        # with clutter at every sensor, log p(Z_t | Z_..t-1) of the gap's last step
+        # (_scan_gap_step); None outside a gap
         self.gap_evidence_: float | None = None
         # the covariance of the broadcast posterior mean's error minus the posterior's
         # (2, 2, 2): None when not carried (_carries_error_excess) and at a track's start
@@ -793,9 +793,8 @@ class StateSpaceDGPT(TrackerBase):
         which is that indicator when nothing is reported; with ``gap_birth_probability``
         > 0, births from pairs of points join them (:meth:`_scan_gap_step`). The estimate is
         the moments of their kernel density: Gaussian kernels of covariance
-        :func:`agents.particles.kernel_scale` times the predicted particles' covariance (the
-        resampled particles' after births)
-        (Silverman's bandwidth), so that a few surviving particles do not report a variance
+        :func:`agents.particles.kernel_scale` times the predicted particles' covariance
+        (Silverman's bandwidth; after births, the resampled particles'), so that a few surviving particles do not report a variance
         near zero. The resampled particles are not jittered with those kernels: on training
         seeds 1000-1011 that drifted tracks (RMSE on the reference paths 2.15 m above
         dgpt-bcm's, against 1.10 m below without the jitter). If every particle lies in a disc (the model cannot explain the
