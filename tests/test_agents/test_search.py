@@ -136,9 +136,7 @@ def two_scan_scene():
     offsets = np.arange(-6.0, 6.0 + 1e-9, 0.25)
     grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), -1).reshape(-1, 2)
     ratio_now = np.exp(area_log_likelihood_ratios(current + grid, current, sensors, spec, 1.0))
-    ratio_before = np.exp(
-        area_log_likelihood_ratios(previous + grid, previous, sensors, spec, 1.0)
-    )
+    ratio_before = np.exp(area_log_likelihood_ratios(previous + grid, previous, sensors, spec, 1.0))
     velocity = (current + grid)[:, None, :] - (previous + grid)[None, :, :]
     velocity_density = stats.multivariate_normal([0, 0], 25.0**2).pdf(velocity)
     near_pair = (ratio_now[:, None] * ratio_before[None, :] * velocity_density).sum() * 0.25**4
@@ -220,9 +218,11 @@ def test_the_search_weighs_its_births_against_its_particles():
     search = SearchFilter(spec, n, np.random.default_rng(0), 25.0, 25.0, beta, 3.0)
     search.states = np.zeros((n, 2, 2))
     search.states[:, :, 0] = 330.0
-    search.previous, search.log_evidence, search.last_step = (previous, sensors, None), np.log(
-        near_pair
-    ), 4
+    search.previous, search.log_evidence, search.last_step = (
+        (previous, sensors, None),
+        np.log(near_pair),
+        4,
+    )
     search.step(5, current, sensors)
     assert_births_share(search.states, beta, previous, current)
 
