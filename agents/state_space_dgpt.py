@@ -794,8 +794,8 @@ class StateSpaceDGPT(TrackerBase):
         > 0, births from pairs of points join them (:meth:`_scan_gap_step`). The estimate is
         the moments of their kernel density: Gaussian kernels of covariance
         :func:`agents.particles.kernel_scale` times the predicted particles' covariance
-        (Silverman's bandwidth; after births, the resampled particles'), so that a few surviving particles do not report a variance
-        near zero. The resampled particles are not jittered with those kernels: on training
+        (Silverman's bandwidth; after births, the resampled particles'), so that a few
+        surviving particles do not report a variance near zero. The resampled particles are not jittered with those kernels: on training
         seeds 1000-1011 that drifted tracks (RMSE on the reference paths 2.15 m above
         dgpt-bcm's, against 1.10 m below without the jitter). If every particle lies in a disc (the model cannot explain the
         silence), the weights are left as they were. With turn modes each particle also

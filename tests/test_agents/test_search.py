@@ -230,15 +230,17 @@ def test_the_search_weighs_its_births_against_its_particles():
 def test_gap_births_come_only_after_a_gap_step_and_the_evidence_ends_with_the_gap(monkeypatch):
     """Through whole steps (training seed 1000 of S1's reference path, clutter at every
     sensor): births are drawn only on a step whose previous step was a gap step with an
-    evidence, and a step with data ends the gap's evidence."""
+    evidence, from the points of that step and this one, and a step with data ends the
+    gap's evidence."""
     import agents.state_space_dgpt as module
 
-    drawn_at = []
+    drawn_at, scans_drawn = [], {}
     original = module.weighed_births
 
-    def spy(*args, **kwargs):
+    def spy(previous_scan, scan, *args, **kwargs):
         drawn_at.append(current_step[0])
-        return original(*args, **kwargs)
+        scans_drawn[current_step[0]] = (previous_scan[0], scan[0])
+        return original(previous_scan, scan, *args, **kwargs)
 
     monkeypatch.setattr(module, "weighed_births", spy)
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1, clutter_sensors="all")
@@ -250,9 +252,10 @@ def test_gap_births_come_only_after_a_gap_step_and_the_evidence_ends_with_the_ga
         gap_birth_probability=GAP_BIRTH_PROBABILITY,
     )
     tracker.reset(info["problem_spec"], seed=1000)
-    current_step, evidence_after = [0], {}
+    current_step, evidence_after, reported = [0], {}, {}
     for step in range(60):
         current_step[0] = step
+        reported[step] = observation["measurements"][observation["mask"].astype(bool)]
         estimate = tracker.update(observation)
         in_gap = tracker.particles_ is not None
         evidence_after[step] = tracker.gap_evidence_ if in_gap else None
@@ -261,6 +264,9 @@ def test_gap_births_come_only_after_a_gap_step_and_the_evidence_ends_with_the_ga
         observation, *_ = env.step(estimate.mean)
     assert drawn_at
     assert all(evidence_after[step - 1] is not None for step in drawn_at), drawn_at
+    for step, (previous_points, points) in scans_drawn.items():
+        np.testing.assert_array_equal(previous_points, reported[step - 1])
+        np.testing.assert_array_equal(points, reported[step])
 
 
 def test_gap_births_find_a_target_that_turned_inside_a_coverage_gap():
