@@ -138,10 +138,14 @@ class TrainingData:
         mask: np.ndarray | None = None,
         ncv: NCVPrior | None = None,
     ) -> TrainingData:
-        X = np.asarray(X, dtype=float)
+        # C order throughout: numpy's reductions and einsum pick their loops from the
+        # operands' memory layout, which for stacked episodes depends on what they were
+        # stacked with; C-ordered inputs keep every intermediate C-ordered, so that a
+        # batch rounds as each problem alone
+        X = np.ascontiguousarray(X, dtype=float)
         if mask is None:
             mask = np.ones(X.shape[:-1], dtype=bool)
-        weight = np.broadcast_to(np.asarray(mask, dtype=float), X.shape[:-1])
+        weight = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=float), X.shape[:-1]))
         pair_weight = weight[..., :, None] * weight[..., None, :]
         identity = np.eye(X.shape[-2])
         unit = basis = None
@@ -155,7 +159,7 @@ class TrainingData:
             basis = ncv.basis_kernel(tau, tau) * pair_weight
         return cls(
             X=X,
-            z=np.asarray(z, dtype=float) * weight,
+            z=np.ascontiguousarray(z, dtype=float) * weight,
             weight=weight,
             pair_weight=pair_weight,
             squared_differences=squared_differences,
@@ -252,7 +256,7 @@ def factorize(log_params: np.ndarray, data: TrainingData) -> Factorization:
         inverse, log_det, jitter, failed = _jittered_inverse(sigma, data.weight, problems)
     # non-finite hyperparameters give NaN matrices, which the Cholesky does not reject
     failed = failed | ~np.isfinite(log_det.reshape(problems + (-1,))).all(axis=-1)
-    alpha = np.einsum("...ij,...j->...i", inverse, data.z)
+    alpha = (inverse * data.z[..., None, :]).sum(axis=-1)  # last-axis sums: see below
     return Factorization(kernel, inverse, log_det, scaled, alpha, jitter, failed)
 
 
@@ -302,7 +306,7 @@ def log_marginal_likelihood(
     data = _as_data(X, z, mask)
     fact = factorize(log_params, data)
     alpha = fact.alpha
-    per_expert = -0.5 * np.einsum("...i,...i->...", data.z, alpha) - 0.5 * fact.log_det
+    per_expert = -0.5 * (data.z * alpha).sum(axis=-1) - 0.5 * fact.log_det
     value = per_expert.sum(axis=-1) - 0.5 * LOG_2PI * data.weight.sum(axis=(-1, -2))
     if not with_gradient:
         return value, None
@@ -322,6 +326,12 @@ def log_marginal_likelihood(
         [grad_signal[..., None], grad_lengthscales, grad_noise[..., None]], axis=-1
     )
     return value, gradient
+
+
+_EXACT_PREDICTION_SIZE = 1 << 16
+"""Largest tests x n x n of one problem whose predictive variance :func:`predict` sums
+elementwise (bit-exact under batching); larger ones use matmul. The trackers' problems are
+far smaller."""
 
 
 def predict(
@@ -352,9 +362,17 @@ def predict(
             q[..., 0] * np.abs(tau_test) ** 3 / 3.0
             + data.ncv.basis_kernel(tau_test[..., None], tau_test[..., None])[..., 0, 0]
         )
-    cross = cross * data.weight[..., :, None]
-    mean = np.einsum("...ns,...n->...s", cross, fact.alpha)
-    reduction = np.einsum("...ns,...nm,...ms->...s", cross, fact.inverse, cross)
+    # (..., s, n) in C order: every sum below runs over the contiguous last axis, whose
+    # rounding depends neither on the batch shape nor on the layout (einsum's loops do),
+    # so that an episode's prediction is the same alone and in a lockstep batch
+    cross = np.ascontiguousarray(np.swapaxes(cross * data.weight[..., :, None], -1, -2))
+    mean = (cross * fact.alpha[..., None, :]).sum(axis=-1)
+    tests, n = cross.shape[-2:]
+    if tests * n * n <= _EXACT_PREDICTION_SIZE:
+        solved = (cross[..., :, None, :] * fact.inverse[..., None, :, :]).sum(axis=-1)
+    else:  # a (tests, n, n) product per problem would not fit: BLAS, exact only alone
+        solved = np.swapaxes(fact.inverse @ np.swapaxes(cross, -1, -2), -1, -2)
+    reduction = (cross * solved).sum(axis=-1)
     variance = np.clip(prior - reduction, 1e-12 * prior, prior)
     return mean, variance
 

@@ -122,6 +122,47 @@ def test_prediction_equals_dense_formula():
             np.testing.assert_allclose(var[b, m], expected_var, rtol=1e-8, atol=1e-12)
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    batch=st.integers(2, 6),
+    axes=st.integers(1, 2),
+    experts=st.integers(1, 8),
+    points=st.integers(1, 16),
+    tests=st.integers(1, 3),
+)
+def test_a_batch_reproduces_each_problem_alone_bit_for_bit(
+    seed, batch, axes, experts, points, tests
+):
+    """Likelihood, gradient and prediction of a stack of problems (episodes x axes, as the
+    lockstep trackers stack them) equal each problem's alone, to the last bit, also when
+    the problem alone comes in another memory layout (an episode's window arrays are built
+    axis-last and transposed; a stack of several is C-ordered): the RL vector environments
+    and the sweep's blocks rely on it. numpy's einsum picks its loop, and so its rounding,
+    from the operands' layout (0.17.0's prediction did)."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(batch, axes, experts, points, 1))
+    z = rng.normal(size=(batch, axes, experts, points))
+    mask = rng.random((batch, 1, experts, points)) < 0.8
+    mask[..., 0] = True
+    log_params = rng.normal(scale=0.4, size=(batch, axes, 3))
+    X_test = rng.normal(size=(batch, axes, experts, tests, 1))
+    together = gp.TrainingData.build(X, z, mask)
+    value, gradient = gp.log_marginal_likelihood(log_params, together)
+    mean, var = gp.predict(log_params, together, None, None, X_test)
+    for b in range(batch):
+        # the values of problem b, stored axis-last as an episode's window builds them
+        X_b = np.moveaxis(np.moveaxis(X[b : b + 1], 1, -2).copy(), -2, 1)
+        z_b = np.moveaxis(np.moveaxis(z[b : b + 1], 1, -1).copy(), -1, 1)
+        alone = gp.TrainingData.build(X_b, z_b, mask[b : b + 1])
+        value_b, gradient_b = gp.log_marginal_likelihood(log_params[b : b + 1], alone)
+        mean_b, var_b = gp.predict(log_params[b : b + 1], alone, None, None, X_test[b : b + 1])
+        np.testing.assert_array_equal(value[b], value_b[0])
+        np.testing.assert_array_equal(gradient[b], gradient_b[0])
+        np.testing.assert_array_equal(mean[b], mean_b[0])
+        np.testing.assert_array_equal(var[b], var_b[0])
+
+
 def test_padding_does_not_change_anything():
     rng = np.random.default_rng(5)
     log_params, X, z, mask = random_problem(rng, batch=1, experts=1, points=5, fill=1.1)
