@@ -71,29 +71,33 @@ def test_every_environment_has_a_vector_entry_point(env_id):
 
 def test_the_stable_baselines_vec_env_equals_dummy_vec_env():
     """The batched SB3 VecEnv used for training against SB3's own DummyVecEnv over the same
-    environments and seeds: observations, rewards, dones, terminal observations and the
-    time limit (episodes of 25 steps, so several autoresets happen)."""
+    environments and seeds: observations, rewards, dones, the tracker's error (a float64
+    the float32 observations and rewards would round away), terminal observations and the
+    time limit (episodes of 25 steps, so several autoresets happen). Three environments:
+    their windows group them differently from step to step, which once changed the last
+    bits of the GP's prediction (0.17.0; seed 23 diverged at step 33)."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from agents.rl.vector import stable_baselines_vec_env
 
-    kwargs = {"scenario": "S2", "clutter_rate": 5.0, "max_episode_steps": 25}
-    batched = stable_baselines_vec_env("DGPTrackWindow-v0", 4, seed=21, env_kwargs=kwargs)
-    reference = DummyVecEnv([lambda: gym.make("DGPTrackWindow-v0", **kwargs)] * 4)
+    n, kwargs = 3, {"scenario": "S2", "clutter_rate": 5.0, "max_episode_steps": 25}
+    batched = stable_baselines_vec_env("DGPTrackWindow-v0", n, seed=21, env_kwargs=kwargs)
+    reference = DummyVecEnv([lambda: gym.make("DGPTrackWindow-v0", **kwargs)] * n)
     reference.seed(21)
     np.testing.assert_array_equal(batched.reset(), reference.reset())
     rng = np.random.default_rng(0)
     dones = 0
     for _ in range(80):
-        actions = rng.integers(0, batched.action_space.n, 4)
+        actions = rng.integers(0, batched.action_space.n, n)
         got, want = batched.step(actions), reference.step(actions)
         for a, b in zip(got[:3], want[:3]):
             np.testing.assert_array_equal(a, b)
         for info_a, info_b in zip(got[3], want[3]):
             assert info_a["TimeLimit.truncated"] == info_b["TimeLimit.truncated"]
+            assert info_a["error"] == info_b["error"]
             if "terminal_observation" in info_b:
                 np.testing.assert_array_equal(
                     info_a["terminal_observation"], info_b["terminal_observation"]
                 )
         dones += int(got[2].sum())
-    assert dones == 12  # 80 steps of 25-step episodes, in 4 environments
+    assert dones == 9  # 80 steps of 25-step episodes, in 3 environments
