@@ -104,7 +104,11 @@ def test_large_matrices_take_the_lapack_path_with_the_same_result():
         )
 
 
-def test_prediction_equals_dense_formula():
+@pytest.mark.parametrize("exact_size", [gp._EXACT_PREDICTION_SIZE, 0])
+def test_prediction_equals_dense_formula(exact_size, monkeypatch):
+    """Both ways of the predictive variance: the elementwise sums (bit-exact under
+    batching) and the matmul that large problems fall back to (``exact_size`` 0)."""
+    monkeypatch.setattr(gp, "_EXACT_PREDICTION_SIZE", exact_size)
     rng = np.random.default_rng(4)
     log_params, X, z, mask = random_problem(rng, dims=1)
     X_test = rng.normal(size=(2, 3, 4, 1))
