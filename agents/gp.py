@@ -140,8 +140,8 @@ class TrainingData:
     ) -> TrainingData:
         # C order throughout: numpy's reductions and einsum pick their loops from the
         # operands' memory layout, which for stacked episodes depends on what they were
-        # stacked with; C-ordered inputs keep every intermediate C-ordered, so that a
-        # batch rounds as each problem alone
+        # stacked with (np.stack keeps a layout its inputs share); C-ordered inputs keep
+        # every intermediate C-ordered, so that a batch rounds as each problem alone
         X = np.ascontiguousarray(X, dtype=float)
         if mask is None:
             mask = np.ones(X.shape[:-1], dtype=bool)
