@@ -665,10 +665,10 @@ class StateSpaceDGPT(TrackerBase):
             awake = None if awake is None else np.array(awake, dtype=bool)
             self.previous_scan_, self.this_scan_ = self.this_scan_, (points, sensors, awake, step)
             keep, started = self.screen_.screen(
-                points, sensors, self.prior_next_, np.full(2, self.noise_var_), obs.get("awake")
+                points, sensors, self.prior_next_, np.full(2, self.noise_var_), awake
             )
             if self.search_ is not None and self.mean_ is None:
-                keep, started = self._search(step, points, sensors, obs.get("awake"), keep, started)
+                keep, started = self._search(step, points, sensors, awake, keep, started)
             points, sensors = points[keep], sensors[keep]
             if started:
                 self._start_track()
