@@ -58,6 +58,7 @@ __all__ = [
     "condition_on_position",
     "filter_window",
     "filter_steps",
+    "bcm_window_log_likelihood",
 ]
 
 _LOG_2PI = np.log(2.0 * np.pi)
@@ -437,3 +438,120 @@ def filter_steps(method, steps, mean, cov, q, manoeuvre: Manoeuvre | None = None
             mean = np.where(valid[..., None], step_mean, mean)
             cov = np.where(valid[..., None, None], step_cov, cov)
     return total, mean, cov
+
+
+def bcm_window_log_likelihood(
+    dt: np.ndarray,
+    valid: np.ndarray,
+    pooled: PooledSummaries,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    q: np.ndarray,
+    manoeuvre: Manoeuvre | None = None,
+) -> np.ndarray:
+    """The log likelihood of :func:`filter_steps` with BCM over a window of L pooled steps,
+    the same numbers to the last bit, faster: the learning of q
+    (:func:`agents.state_space_dgpt._learn_pooled`) filters a window at three trial points
+    every step, and on arrays of a few dozen entries numpy's per-call overhead is the cost,
+    several times higher when a call broadcasts. So the process-noise components lie on a
+    leading axis of every array, the filtered state repeated on it; every array has one
+    shape (the terms that do not depend on the state computed for all steps at once before
+    the loop), and a sum over the two components is the array plus its reverse along that
+    axis (x0 + x1 in both rows; a sum of two numbers does not depend on their order). Each
+    entry is computed by the operations of :func:`ncv_predict`,
+    :func:`pooled_log_likelihood`, :func:`pooled_update` and
+    :func:`baselines.kalman.reduce_mixture`, in their order, so the result equals theirs
+    (checked bit for bit in tests/test_agents/test_state_space.py).
+
+    ``dt`` and ``valid`` (L, ...) and the fields of ``pooled`` (L, ...) are the steps' as
+    :func:`filter_steps` takes them (a step where ``valid`` is False is skipped); ``mean``
+    (..., 2) and ``cov`` (..., 2, 2), the first step's prior, broadcast against ``q``
+    (..., 2); at most two process-noise components (:func:`process_noise_components`).
+    Returns the log likelihood (...) with ``q``'s shape."""
+    q = np.asarray(q, dtype=float)
+    shape = q.shape
+    components = process_noise_components(q, manoeuvre)
+    count = len(components)
+    state_shape = (count,) + shape
+    full = (len(dt),) + state_shape
+
+    def both(array):  # the sum over the components, in every component's row
+        return array + array[::-1] if count == 2 else array
+
+    # the steps' data and dt, then the first step's prior, each on the full shape (one copy)
+    data = np.empty((6,) + full)
+    data[:5] = np.expand_dims(_stack(pooled), 2)
+    data[5] = np.expand_dims(dt, 1)
+    counts, precision, summary, residual, log_det, dt = data
+    state = np.empty((5,) + state_shape)
+    entries = (mean[..., 0], mean[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1])
+    state[:] = _stack(entries)[:, None]
+    position, velocity, a, b, d = state
+    valid = np.asarray(valid, dtype=bool)
+    every_valid = valid.reshape(len(valid), -1).all(axis=1)
+    if not every_valid.all():
+        valid = np.broadcast_to(np.expand_dims(valid, 1), full)
+    two_dt, dt_squared = 2.0 * dt, dt * dt
+    # ncv_predict's process-noise terms, each component's intensity in its row
+    intensity = _stack([c for c, _ in components])
+    var_noise, cross_noise = intensity * dt**3 / 3.0, intensity * dt**2 / 2.0
+    velocity_noise = intensity * dt
+    log_priors = np.zeros(state_shape) + np.log(
+        [probability for _, probability in components]
+    ).reshape((count,) + (1,) * len(shape))
+    with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries
+        summary_var = 1.0 / precision
+        constant = counts * _LOG_2PI + log_det
+        total = np.zeros(state_shape)
+        for index in range(full[0]):
+            step_dt = dt[index]
+            predicted = position + step_dt * velocity
+            var = a + two_dt[index] * b + dt_squared[index] * d + var_noise[index]
+            cross = b + step_dt * d + cross_noise[index]
+            innovation_var = var + summary_var[index]
+            offset = summary[index] - predicted
+            log_weights = log_priors + -0.5 * (
+                constant[index]
+                + np.log1p(var * precision[index])
+                + residual[index]
+                + offset**2 / innovation_var
+            )
+            if count == 2:
+                step_log_likelihood = np.logaddexp(log_weights, log_weights[::-1])
+            else:
+                step_log_likelihood = log_weights
+            weights = np.exp(log_weights - np.maximum(log_weights, log_weights[::-1]))
+            weights = weights / both(weights)
+            gain_p, gain_v = var / innovation_var, cross / innovation_var
+            scaled_p, scaled_v = innovation_var * gain_p, innovation_var * gain_v
+            new_p = predicted + offset * gain_p
+            new_v = velocity + offset * gain_v
+            mixed_p, mixed_v = both(weights * new_p), both(weights * new_v)
+            spread_p, spread_v = new_p - mixed_p, new_v - mixed_v
+            weighed_p, weighed_v = weights * spread_p, weights * spread_v
+            c00 = both(weights * (var - scaled_p * gain_p)) + both(weighed_p * spread_p)
+            c01 = both(weights * (cross - scaled_p * gain_v)) + both(weighed_p * spread_v)
+            c10 = both(weights * (cross - scaled_v * gain_p)) + both(weighed_v * spread_p)
+            c11 = both(weights * (d + velocity_noise[index] - scaled_v * gain_v)) + both(
+                weighed_v * spread_v
+            )
+            c00, c01, c11 = 0.5 * (c00 + c00), 0.5 * (c01 + c10), 0.5 * (c11 + c11)
+            if every_valid[index]:
+                total = total + step_log_likelihood
+                position, velocity, a, b, d = mixed_p, mixed_v, c00, c01, c11
+            else:
+                keep = valid[index]
+                total = np.where(keep, total + step_log_likelihood, total)
+                position = np.where(keep, mixed_p, position)
+                velocity = np.where(keep, mixed_v, velocity)
+                a, b, d = np.where(keep, c00, a), np.where(keep, c01, b), np.where(keep, c11, d)
+    return total[0]
+
+
+def _stack(arrays) -> np.ndarray:
+    """The arrays broadcast together and stacked on a new first axis (np.stack alone when
+    their shapes agree, which saves the broadcast's cost on small arrays)."""
+    arrays = [np.asarray(array, dtype=float) for array in arrays]
+    if len({array.shape for array in arrays}) > 1:
+        arrays = np.broadcast_arrays(*arrays)
+    return np.stack(arrays)

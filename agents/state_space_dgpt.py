@@ -121,9 +121,9 @@ from agents.state_space import (
     WindowStep,
     aggregate_error_cov,
     aggregate_error_var,
+    bcm_window_log_likelihood,
     condition_on_position,
     expert_posteriors,
-    filter_steps,
     fused_update,
     ncv_predict,
     pool_summaries,
@@ -570,7 +570,7 @@ class StateSpaceDGPT(TrackerBase):
     def _start_track(self) -> None:
         """Forget the track (not the learnt q): the next measurements start a new one."""
         self.steps_: deque[WindowStep] = deque(maxlen=self.window)
-        self.pooled_: deque[PooledSummaries] = deque(maxlen=self.window)
+        self.pooled_: deque[np.ndarray] = deque(maxlen=self.window)
         self.mean_: np.ndarray | None = None  # (2 axes, 2) broadcast posterior at last_step_
         self.cov_: np.ndarray | None = None  # (2, 2, 2)
         self.last_step_ = 0
@@ -609,7 +609,7 @@ class StateSpaceDGPT(TrackerBase):
     ) -> list[Estimate]:
         """One step of many episodes in lockstep: each tracker's steps 1-4 alone, then the
         learning of every tracker that learns at this step, their windows filtered together
-        (:func:`agents.state_space.filter_steps`); the numbers equal the one-by-one ones,
+        (:func:`agents.state_space.bcm_window_log_likelihood`); the numbers equal the one-by-one ones,
         since :meth:`update` is this with one tracker."""
         pending = [tracker._observe(obs) for tracker, obs in zip(trackers, observations)]
         learners = [tracker for tracker, step in zip(trackers, pending) if step is not None]
@@ -766,7 +766,8 @@ class StateSpaceDGPT(TrackerBase):
         )
         self.steps_.append(window_step)
         summary_var = np.full(2, self.noise_var_)[:, None] + window_step.spread
-        self.pooled_.append(pool_summaries(window_step.summaries, summary_var))
+        # as an array (field, axis): the learning stacks the window's
+        self.pooled_.append(np.array(pool_summaries(window_step.summaries, summary_var)))
         self.expert_sensors_ = hypotheses["sensors"]
         self.expert_means_ = hypotheses["expert_means"][best]
         self.expert_covs_ = hypotheses["expert_covs"][best]
@@ -1329,7 +1330,13 @@ class StateSpaceDGPT(TrackerBase):
         mode_means, mode_covs = np.empty((count, 2, 2)), np.empty((count, 2, 2, 2))
         probabilities = np.empty(count)
         for mode in range(count):
-            own = modes == mode
+            own = np.flatnonzero(modes == mode)
+            if own.size == 1:  # reduce_mixture of one component, without its cost
+                (only,) = own
+                mode_means[mode] = means[:, only]
+                mode_covs[mode] = 0.5 * (covs[:, only] + np.swapaxes(covs[:, only], -1, -2))
+                probabilities[mode] = np.exp(log_weights[only])
+                continue
             mode_means[mode], mode_covs[mode] = reduce_mixture(
                 log_weights[own], means[:, own], covs[:, own]
             )
@@ -1417,8 +1424,8 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     """Step 5 of trackers that share the manoeuvre component: one Newton step of log q per
     axis on each window's exact log likelihood at log q, log q + h and log q - h, the
     windows padded at the front to the longest and filtered together from their pooled sums
-    at (episode, trial point, axis) with :data:`LEARNING_FILTER`."""
-    first = trackers[0]
+    at (episode, trial point, axis) with :data:`LEARNING_FILTER`
+    (:func:`agents.state_space.bcm_window_log_likelihood`, :func:`filter_steps`'s numbers)."""
     length = max(len(tracker.steps_) for tracker in trackers)
     # (step, tracker, field, axis), padded at the front with zero sums that are skipped
     sums = np.zeros((length, len(trackers), len(PooledSummaries._fields), 2))
@@ -1426,21 +1433,18 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     valid = np.zeros((length, len(trackers), 1, 1), dtype=bool)
     for column, tracker in enumerate(trackers):
         start = length - len(tracker.steps_)
-        sums[start:, column] = tracker.pooled_
+        sums[start:, column] = np.stack(tracker.pooled_)
         dt[start:, column, 0, 0] = [step.dt for step in tracker.steps_]
         valid[start:, column] = True
-    steps = [
-        (dt[index], valid[index], PooledSummaries(*np.moveaxis(sums[index], 1, 0)[:, :, None]))
-        for index in range(length)
-    ]
     log_q = np.stack([tracker.log_q_ for tracker in trackers])
-    log_likelihood, _, _ = filter_steps(
-        LEARNING_FILTER,
-        steps,
+    log_likelihood = bcm_window_log_likelihood(
+        dt,
+        valid,
+        PooledSummaries(*np.moveaxis(sums, 2, 0)[:, :, :, None]),
         np.stack([tracker.steps_[0].mean for tracker in trackers])[:, None],
         np.stack([tracker.steps_[0].cov for tracker in trackers])[:, None],
         np.exp(log_q[:, None, :] + _TRIAL_OFFSETS[None, :, None]),
-        first.manoeuvre,
+        trackers[0].manoeuvre,
     )
     for tracker, values in zip(trackers, log_likelihood):
         tracker._climb(values)

@@ -31,6 +31,7 @@ from agents.state_space import (
     WindowStep,
     aggregate_error_cov,
     aggregate_error_var,
+    bcm_window_log_likelihood,
     condition_on_position,
     expert_posteriors,
     filter_steps,
@@ -370,6 +371,45 @@ def test_windows_filtered_together_padded_at_the_front_equal_each_alone(method):
     for i, single in enumerate(alone):
         for got, expected in zip(together, single):
             np.testing.assert_array_equal(got[i], expected)
+
+
+@given(
+    seeds,
+    st.integers(1, 6),
+    st.integers(1, 3),
+    st.integers(1, 3),
+    st.sampled_from([None, Manoeuvre(400.0, 0.5), Manoeuvre(20.0, 0.05)]),
+)
+@settings(max_examples=60, deadline=None)
+def test_the_fast_window_likelihood_is_the_bcm_filters_bit_for_bit(
+    seed, length, episodes, trials, manoeuvre
+):
+    """:func:`bcm_window_log_likelihood`, which the learning of q calls every step, gives
+    :func:`filter_steps`'s BCM log likelihood to the last bit (it computes every entry by
+    the same operations in the same order): windows of several episodes (up to 6 steps,
+    each episode's window starting at a random step, the steps before it invalid and NaN
+    so that any use of them shows), several trial points of q, steps of 0, 1 and several
+    seconds, 1-3 summaries a step, with and without the manoeuvre component."""
+    rng = np.random.default_rng(seed)
+    starts = rng.integers(0, length, episodes)
+    starts[0] = 0  # the longest window fills the batch
+    dt = rng.choice([0.0, 1.0, 1.0, 3.0], (length, episodes, 1, 1))
+    valid = np.arange(length)[:, None, None, None] >= starts[None, :, None, None]
+    sums = np.full((length, episodes, 5, 2), np.nan)
+    mean, cov = random_state(rng, (episodes, 1, 2))
+    for step in range(length):
+        for episode in np.flatnonzero(valid[step, :, 0, 0]):
+            m = int(rng.integers(1, 4))
+            summaries = mean[episode, 0, :, :1] + rng.normal(0.0, 20.0, (2, m))
+            sums[step, episode] = pool_summaries(summaries, rng.uniform(0.5, 30.0, (2, m)))
+    pooled = PooledSummaries(*np.moveaxis(sums, 2, 0)[:, :, :, None])
+    q = np.exp(rng.uniform(np.log(1e-4), np.log(300.0), (episodes, trials, 2)))
+    steps = [(dt[i], valid[i], PooledSummaries(*(f[i] for f in pooled))) for i in range(length)]
+    expected, _, _ = filter_steps("bcm", steps, mean, cov, q, manoeuvre)
+    got = bcm_window_log_likelihood(dt, valid, pooled, mean, cov, q, manoeuvre)
+    assert got.shape == q.shape
+    assert np.isfinite(got).all()
+    np.testing.assert_array_equal(got, expected)
 
 
 def test_newton_step_solves_a_quadratic_and_respects_its_limits():
