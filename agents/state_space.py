@@ -465,9 +465,10 @@ def bcm_window_log_likelihood(
 
     ``dt`` and ``valid`` (L, ...) and the fields of ``pooled`` (L, ...) are the steps' as
     :func:`filter_steps` takes them (a step where ``valid`` is False is skipped); ``mean``
-    (..., 2) and ``cov`` (..., 2, 2), the first step's prior, broadcast against ``q``
-    (..., 2); at most two process-noise components (:func:`process_noise_components`).
-    Returns the log likelihood (...) with ``q``'s shape."""
+    (..., 2) and ``cov`` (..., 2, 2) are the first step's prior. Each step's arrays and the
+    prior broadcast to ``q``'s shape (..., 2) without extending it; at most two
+    process-noise components (:func:`process_noise_components`); computed in float64.
+    Returns the log likelihood (...) with ``q``'s shape (zeros for an empty window)."""
     q = np.asarray(q, dtype=float)
     shape = q.shape
     components = process_noise_components(q, manoeuvre)
@@ -478,19 +479,30 @@ def bcm_window_log_likelihood(
     def both(array):  # the sum over the components, in every component's row
         return array + array[::-1] if count == 2 else array
 
+    if not len(dt):
+        return np.zeros(shape)
+
+    def aligned(array, lead: int = 0):  # its last axes on q's, a component axis after lead
+        array = np.asarray(array)
+        tail = array.shape[lead:]
+        if len(tail) > len(shape):
+            raise ValueError(f"arrays must broadcast to q's shape {shape}; got {array.shape}")
+        array = array.reshape(array.shape[:lead] + (1,) * (len(shape) - len(tail)) + tail)
+        return np.expand_dims(array, lead)
+
     # the steps' data and dt, then the first step's prior, each on the full shape (one copy)
     data = np.empty((6,) + full)
-    data[:5] = np.expand_dims(_stack(pooled), 2)
-    data[5] = np.expand_dims(dt, 1)
+    data[:5] = _stack([aligned(field, 1) for field in pooled])
+    data[5] = aligned(dt, 1)
     counts, precision, summary, residual, log_det, dt = data
     state = np.empty((5,) + state_shape)
     entries = (mean[..., 0], mean[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1])
-    state[:] = _stack(entries)[:, None]
+    state[:] = _stack([aligned(entry) for entry in entries])
     position, velocity, a, b, d = state
-    valid = np.asarray(valid, dtype=bool)
+    valid = aligned(np.asarray(valid, dtype=bool), 1)
     every_valid = valid.reshape(len(valid), -1).all(axis=1)
     if not every_valid.all():
-        valid = np.broadcast_to(np.expand_dims(valid, 1), full)
+        valid = np.broadcast_to(valid, full)
     two_dt, dt_squared = 2.0 * dt, dt * dt
     # ncv_predict's process-noise terms, each component's intensity in its row
     intensity = _stack([c for c, _ in components])

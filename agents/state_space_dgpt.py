@@ -609,8 +609,8 @@ class StateSpaceDGPT(TrackerBase):
     ) -> list[Estimate]:
         """One step of many episodes in lockstep: each tracker's steps 1-4 alone, then the
         learning of every tracker that learns at this step, their windows filtered together
-        (:func:`agents.state_space.bcm_window_log_likelihood`); the numbers equal the one-by-one ones,
-        since :meth:`update` is this with one tracker."""
+        (:func:`_learn_pooled`); the numbers equal the one-by-one ones, since :meth:`update`
+        is this with one tracker."""
         pending = [tracker._observe(obs) for tracker, obs in zip(trackers, observations)]
         learners = [tracker for tracker, step in zip(trackers, pending) if step is not None]
         learners = [
@@ -1424,8 +1424,8 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     """Step 5 of trackers that share the manoeuvre component: one Newton step of log q per
     axis on each window's exact log likelihood at log q, log q + h and log q - h, the
     windows padded at the front to the longest and filtered together from their pooled sums
-    at (episode, trial point, axis) with :data:`LEARNING_FILTER`
-    (:func:`agents.state_space.bcm_window_log_likelihood`, :func:`filter_steps`'s numbers)."""
+    at (episode, trial point, axis) with :data:`LEARNING_FILTER`, BCM, by
+    :func:`agents.state_space.bcm_window_log_likelihood` (:func:`filter_steps`'s numbers)."""
     length = max(len(tracker.steps_) for tracker in trackers)
     # (step, tracker, field, axis), padded at the front with zero sums that are skipped
     sums = np.zeros((length, len(trackers), len(PooledSummaries._fields), 2))

@@ -412,6 +412,37 @@ def test_the_fast_window_likelihood_is_the_bcm_filters_bit_for_bit(
     np.testing.assert_array_equal(got, expected)
 
 
+def test_the_fast_window_likelihood_broadcasts_as_the_filter_does():
+    """Inputs with fewer axes than q, as :func:`filter_steps` takes them: one prior for
+    every episode and trial point, a scalar dt and validity per step, sums per axis only;
+    one step invalid; and the empty window (zeros). Arrays that would extend q's shape are
+    refused with the shape in the message."""
+    rng = np.random.default_rng(3)
+    length, manoeuvre = 4, Manoeuvre(400.0, 0.5)
+    mean, cov = random_state(rng, (2,))
+    sums = np.stack(
+        [
+            pool_summaries(rng.normal(0.0, 20.0, (2, 3)), rng.uniform(0.5, 30.0, (2, 3)))
+            for _ in range(length)
+        ]
+    )  # (L, field, axis)
+    pooled = PooledSummaries(*np.moveaxis(sums, 1, 0))  # fields (L, 2)
+    dt, valid = np.array([0.0, 1.0, 3.0, 1.0]), np.array([True, False, True, True])
+    q = np.exp(rng.uniform(np.log(1e-4), np.log(300.0), (5, 3, 2)))
+    steps = [(dt[i], valid[i], PooledSummaries(*(f[i] for f in pooled))) for i in range(length)]
+    expected, _, _ = filter_steps("bcm", steps, mean, cov, q, manoeuvre)
+    got = bcm_window_log_likelihood(dt, valid, pooled, mean, cov, q, manoeuvre)
+    assert got.shape == (5, 3, 2)
+    np.testing.assert_array_equal(got, expected)
+    empty = PooledSummaries(*np.zeros((5, 0, 2)))
+    np.testing.assert_array_equal(
+        bcm_window_log_likelihood(dt[:0], valid[:0], empty, mean, cov, q), np.zeros(q.shape)
+    )
+    wider = PooledSummaries(*(np.repeat(field[:, None], 3, axis=1) for field in pooled))
+    with pytest.raises(ValueError, match=r"q's shape \(2,\)"):
+        bcm_window_log_likelihood(dt, valid, wider, mean, cov, q[0, 0], manoeuvre)
+
+
 def test_newton_step_solves_a_quadratic_and_respects_its_limits():
     h = 0.05
     x = np.array([0.0, 0.0, 0.0])
