@@ -484,11 +484,12 @@ def bcm_window_log_likelihood(
 
     def aligned(array, lead: int = 0):  # its last axes on q's, a component axis after lead
         array = np.asarray(array)
-        tail = array.shape[lead:]
-        if len(tail) > len(shape):
+        missing = len(shape) + lead - array.ndim
+        if missing < 0:
             raise ValueError(f"arrays must broadcast to q's shape {shape}; got {array.shape}")
-        array = array.reshape(array.shape[:lead] + (1,) * (len(shape) - len(tail)) + tail)
-        return np.expand_dims(array, lead)
+        if missing:
+            array = array.reshape(array.shape[:lead] + (1,) * missing + array.shape[lead:])
+        return array[:, None] if lead else array[None]
 
     # the steps' data and dt, then the first step's prior, each on the full shape (one copy)
     data = np.empty((6,) + full)
