@@ -471,6 +471,8 @@ def bcm_window_log_likelihood(
     Returns the log likelihood (...) with ``q``'s shape (zeros for an empty window)."""
     q = np.asarray(q, dtype=float)
     shape = q.shape
+    if not len(dt):
+        return np.zeros(shape)
     components = process_noise_components(q, manoeuvre)
     count = len(components)
     state_shape = (count,) + shape
@@ -478,9 +480,6 @@ def bcm_window_log_likelihood(
 
     def both(array):  # the sum over the components, in every component's row
         return array + array[::-1] if count == 2 else array
-
-    if not len(dt):
-        return np.zeros(shape)
 
     def aligned(array, lead: int = 0):  # its last axes on q's, a component axis after lead
         array = np.asarray(array)
