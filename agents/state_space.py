@@ -457,7 +457,9 @@ def bcm_window_log_likelihood(
     leading axis of every array, the filtered state repeated on it; every array has one
     shape (the terms that do not depend on the state computed for all steps at once before
     the loop), and a sum over the two components is the array plus its reverse along that
-    axis (x0 + x1 in both rows; a sum of two numbers does not depend on their order). Each
+    axis (x0 + x1 in both rows; a sum of two numbers does not depend on their order); the
+    position and velocity terms, and the covariance's four, are stacked so that one call
+    computes them all (elementwise, so each entry is still its own operations). Each
     entry is computed by the operations of :func:`ncv_predict`,
     :func:`pooled_log_likelihood`, :func:`pooled_update` and
     :func:`baselines.kalman.reduce_mixture`, in their order, so the result equals theirs
@@ -481,6 +483,12 @@ def bcm_window_log_likelihood(
     def both(array):  # the sum over the components, in every component's row
         return array + array[::-1] if count == 2 else array
 
+    def both_stacked(array):  # the same for stacked terms: the components on axis -ndim(q)-1
+        if count == 1:
+            return array
+        flipped = array[(slice(None),) * (array.ndim - len(state_shape)) + (slice(None, None, -1),)]
+        return array + flipped
+
     def aligned(array, lead: int = 0):  # its last axes on q's, a component axis after lead
         array = np.asarray(array)
         missing = len(shape) + lead - array.ndim
@@ -492,12 +500,13 @@ def bcm_window_log_likelihood(
 
     # the steps' data and dt, then the first step's prior, each on the full shape (one copy)
     data = np.empty((6,) + full)
-    data[:5] = _stack([aligned(field, 1) for field in pooled])
-    data[5] = aligned(dt, 1)
+    for row, array in enumerate((*pooled, dt)):  # assignments broadcast: no copies made first
+        data[row] = aligned(array, 1)
     counts, precision, summary, residual, log_det, dt = data
     state = np.empty((5,) + state_shape)
     entries = (mean[..., 0], mean[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1])
-    state[:] = _stack([aligned(entry) for entry in entries])
+    for row, entry in enumerate(entries):
+        state[row] = aligned(entry)
     position, velocity, a, b, d = state
     valid = aligned(np.asarray(valid, dtype=bool), 1)
     every_valid = valid.reshape(len(valid), -1).all(axis=1)
@@ -505,21 +514,35 @@ def bcm_window_log_likelihood(
         valid = np.broadcast_to(valid, full)
     two_dt, dt_squared = 2.0 * dt, dt * dt
     # ncv_predict's process-noise terms, each component's intensity in its row
-    intensity = _stack([c for c, _ in components])
+    intensity = np.empty(state_shape)
+    for row, (component, _) in enumerate(components):
+        intensity[row] = component
     var_noise, cross_noise = intensity * dt**3 / 3.0, intensity * dt**2 / 2.0
     velocity_noise = intensity * dt
     log_priors = np.zeros(state_shape) + np.log(
         [probability for _, probability in components]
     ).reshape((count,) + (1,) * len(shape))
+    # the position and velocity terms stacked on a leading axis (and the covariance's on
+    # two), so that one call computes both (or all four) entries with their own operations
+    moments = np.empty((2,) + state_shape)  # the filtered position and velocity
+    moments[0], moments[1] = position, velocity
+    base, gains = np.empty((2,) + state_shape), np.empty((2,) + state_shape)
+    block = np.empty((2, 2) + state_shape)  # the predicted covariance, then its update
     with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries
         summary_var = 1.0 / precision
         constant = counts * _LOG_2PI + log_det
         total = np.zeros(state_shape)
         for index in range(full[0]):
             step_dt = dt[index]
-            predicted = position + step_dt * velocity
-            var = a + two_dt[index] * b + dt_squared[index] * d + var_noise[index]
-            cross = b + step_dt * d + cross_noise[index]
+            position, velocity = moments
+            predicted = np.add(position, step_dt * velocity, out=base[0])
+            base[1] = velocity
+            var = np.add(
+                a + two_dt[index] * b + dt_squared[index] * d, var_noise[index], out=block[0, 0]
+            )
+            cross = np.add(b + step_dt * d, cross_noise[index], out=block[0, 1])
+            block[1, 0] = cross
+            np.add(d, velocity_noise[index], out=block[1, 1])
             innovation_var = var + summary_var[index]
             offset = summary[index] - predicted
             log_weights = log_priors + -0.5 * (
@@ -534,36 +557,28 @@ def bcm_window_log_likelihood(
                 step_log_likelihood = log_weights
             weights = np.exp(log_weights - np.maximum(log_weights, log_weights[::-1]))
             weights = weights / both(weights)
-            gain_p, gain_v = var / innovation_var, cross / innovation_var
-            scaled_p, scaled_v = innovation_var * gain_p, innovation_var * gain_v
-            new_p = predicted + offset * gain_p
-            new_v = velocity + offset * gain_v
-            mixed_p, mixed_v = both(weights * new_p), both(weights * new_v)
-            spread_p, spread_v = new_p - mixed_p, new_v - mixed_v
-            weighed_p, weighed_v = weights * spread_p, weights * spread_v
-            c00 = both(weights * (var - scaled_p * gain_p)) + both(weighed_p * spread_p)
-            c01 = both(weights * (cross - scaled_p * gain_v)) + both(weighed_p * spread_v)
-            c10 = both(weights * (cross - scaled_v * gain_p)) + both(weighed_v * spread_p)
-            c11 = both(weights * (d + velocity_noise[index] - scaled_v * gain_v)) + both(
-                weighed_v * spread_v
-            )
-            c00, c01, c11 = 0.5 * (c00 + c00), 0.5 * (c01 + c10), 0.5 * (c11 + c11)
+            np.divide(block[0], innovation_var, out=gains)  # var and cross over it
+            scaled = innovation_var * gains
+            new = base + offset * gains
+            weighed_new = weights * new
+            mixed = both_stacked(weighed_new)
+            spread = new - mixed
+            weighed = weights * spread
+            updated = weights * (block - scaled[:, None] * gains[None, :])
+            spreads = weighed[:, None] * spread[None, :]
+            cov_sum = both_stacked(updated) + both_stacked(spreads)
+            cov_sum = 0.5 * (cov_sum + cov_sum.swapaxes(0, 1))
             if every_valid[index]:
                 total = total + step_log_likelihood
-                position, velocity, a, b, d = mixed_p, mixed_v, c00, c01, c11
+                moments = mixed
+                a, b, d = cov_sum[0, 0], cov_sum[0, 1], cov_sum[1, 1]
             else:
                 keep = valid[index]
                 total = np.where(keep, total + step_log_likelihood, total)
-                position = np.where(keep, mixed_p, position)
-                velocity = np.where(keep, mixed_v, velocity)
-                a, b, d = np.where(keep, c00, a), np.where(keep, c01, b), np.where(keep, c11, d)
+                moments = np.where(keep, mixed, moments)
+                a, b, d = (
+                    np.where(keep, cov_sum[0, 0], a),
+                    np.where(keep, cov_sum[0, 1], b),
+                    np.where(keep, cov_sum[1, 1], d),
+                )
     return total[0]
-
-
-def _stack(arrays) -> np.ndarray:
-    """The arrays broadcast together and stacked on a new first axis (np.stack alone when
-    their shapes agree, which saves the broadcast's cost on small arrays)."""
-    arrays = [np.asarray(array, dtype=float) for array in arrays]
-    if len({array.shape for array in arrays}) > 1:
-        arrays = np.broadcast_arrays(*arrays)
-    return np.stack(arrays)
