@@ -319,3 +319,31 @@ def test_all_clutter_floor_prints_the_floor_beside_the_tracker_in_both_modes():
     assert floor < all_clutter
     refused = run_script("all_clutter_floor.py", "--draws", "2")
     assert refused.returncode == 2 and "--draws" in refused.stderr
+
+
+def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
+    """scripts/fingerprint.py's digests: an episode whose one estimate moves by one unit in
+    the last place gets another digest (the script exists to show that a speed change
+    leaves every bit alone), the same episode the same one; a batched sensor environment
+    under the same seeds gives the same digest twice."""
+    import importlib.util
+
+    import gymnasium as gym
+
+    from dgpt_gym.benchmark.episodes import run_episode
+    from dgpt_gym.registry import make_tracker
+
+    spec = importlib.util.spec_from_file_location(
+        "fingerprint", ROOT / "scripts" / "fingerprint.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    result = run_episode(env, make_tracker("dgpt-rbcm"), 0)
+    again = run_episode(env, make_tracker("dgpt-rbcm"), 0)
+    assert module.episode_digest(result) == module.episode_digest(again)
+    result.mean[7, 1] = np.nextafter(result.mean[7, 1], np.inf)
+    assert module.episode_digest(result) != module.episode_digest(again)
+    assert module.vector_env_digest("DGPTrackSensors-v2", 3) == module.vector_env_digest(
+        "DGPTrackSensors-v2", 3
+    )
