@@ -347,3 +347,33 @@ def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
     assert module.vector_env_digest("DGPTrackSensors-v2", 3) == module.vector_env_digest(
         "DGPTrackSensors-v2", 3
     )
+
+
+def test_calibration_misses_tallies_by_hand():
+    """scripts/calibration_misses.py's table on four hand-made steps: the share of axes
+    outside 3 sigma and the median and mean of z_x^2 + z_y^2 per group."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "calibration_misses", ROOT / "scripts" / "calibration_misses.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    # (z_x, z_y, steps since a gap, target points, turning)
+    steps = np.array(
+        [
+            [4.0, 0.0, 0, 1, 0],  # one axis outside: NEES 16
+            [3.0, 1.0, 0, 2, 1],  # on the bound, inside: NEES 10
+            [0.0, 3.5, 12, 1, 1],  # one axis outside: NEES 12.25
+            [2.5, 0.5, 3, 3, 0],  # inside: NEES 6.5
+        ]
+    )
+    table = {label: rest for label, *rest in module.miss_table(steps)}
+    assert table["all detected steps"] == [4, 2 / 8, 11.125, 44.75 / 4]
+    assert table["0 steps since a gap"] == [2, 1 / 4, 13.0, 13.0]
+    assert table["2-4 steps since a gap"] == [1, 0.0, 6.5, 6.5]
+    assert table["10+ steps since a gap"] == [1, 0.5, 12.25, 12.25]
+    assert table["1 target point"] == [2, 2 / 4, 14.125, 14.125]
+    assert table["2+ target points"] == [2, 0.0, 8.25, 8.25]
+    assert table["turning"] == [2, 1 / 4, 11.125, 11.125]
+    assert table["1 step since a gap"][0] == 0 and np.isnan(table["1 step since a gap"][1])
