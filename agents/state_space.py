@@ -480,10 +480,8 @@ def bcm_window_log_likelihood(
     state_shape = (count,) + shape
     full = (len(dt),) + state_shape
 
-    def both(array):  # the sum over the components, in every component's row
-        return array + array[::-1] if count == 2 else array
-
-    def both_stacked(array):  # the same for stacked terms: the components on axis -ndim(q)-1
+    def both(array):  # the sum over the components, in every component's row (the
+        # components' axis is the first of the state's, after any stacked terms' axes)
         if count == 1:
             return array
         flipped = array[(slice(None),) * (array.ndim - len(state_shape)) + (slice(None, None, -1),)]
@@ -498,16 +496,18 @@ def bcm_window_log_likelihood(
             array = array.reshape(array.shape[:lead] + (1,) * missing + array.shape[lead:])
         return array[:, None] if lead else array[None]
 
-    # the steps' data and dt, then the first step's prior, each on the full shape (one copy)
+    # the steps' data and dt, each on the full shape (one copy)
     data = np.empty((6,) + full)
     for row, array in enumerate((*pooled, dt)):  # assignments broadcast: no copies made first
         data[row] = aligned(array, 1)
     counts, precision, summary, residual, log_det, dt = data
-    state = np.empty((5,) + state_shape)
-    entries = (mean[..., 0], mean[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1])
-    for row, entry in enumerate(entries):
-        state[row] = aligned(entry)
-    position, velocity, a, b, d = state
+    # the first step's prior: the filtered position and velocity stacked on a leading axis
+    moments, covariance = np.empty((2,) + state_shape), np.empty((3,) + state_shape)
+    for row, entry in enumerate((mean[..., 0], mean[..., 1])):
+        moments[row] = aligned(entry)
+    for row, entry in enumerate((cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1])):
+        covariance[row] = aligned(entry)
+    a, b, d = covariance
     valid = aligned(np.asarray(valid, dtype=bool), 1)
     every_valid = valid.reshape(len(valid), -1).all(axis=1)
     if not every_valid.all():
@@ -524,8 +524,6 @@ def bcm_window_log_likelihood(
     ).reshape((count,) + (1,) * len(shape))
     # the position and velocity terms stacked on a leading axis (and the covariance's on
     # two), so that one call computes both (or all four) entries with their own operations
-    moments = np.empty((2,) + state_shape)  # the filtered position and velocity
-    moments[0], moments[1] = position, velocity
     base, gains = np.empty((2,) + state_shape), np.empty((2,) + state_shape)
     block = np.empty((2, 2) + state_shape)  # the predicted covariance, then its update
     with np.errstate(divide="ignore", invalid="ignore"):  # padded steps hold no summaries
@@ -561,12 +559,12 @@ def bcm_window_log_likelihood(
             scaled = innovation_var * gains
             new = base + offset * gains
             weighed_new = weights * new
-            mixed = both_stacked(weighed_new)
+            mixed = both(weighed_new)
             spread = new - mixed
             weighed = weights * spread
             updated = weights * (block - scaled[:, None] * gains[None, :])
             spreads = weighed[:, None] * spread[None, :]
-            cov_sum = both_stacked(updated) + both_stacked(spreads)
+            cov_sum = both(updated) + both(spreads)
             cov_sum = 0.5 * (cov_sum + cov_sum.swapaxes(0, 1))
             if every_valid[index]:
                 total = total + step_log_likelihood

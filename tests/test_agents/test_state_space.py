@@ -41,7 +41,7 @@ from agents.state_space import (
     pool_summaries,
     step_log_likelihood,
 )
-from agents.state_space_dgpt import LOG_STEP, StateSpaceDGPT, newton_step
+from agents.state_space_dgpt import LOG_STEP, PROCESS_NOISE_BOUNDS, StateSpaceDGPT, newton_step
 from baselines.kalman import constant_velocity_model, kalman_predict
 from dgpt_gym.benchmark.episodes import run_episode
 
@@ -958,3 +958,21 @@ def test_the_reported_variance_is_the_estimates_error_variance_in_the_model(aggr
             estimate = tracker.update(measurement_obs(t, points, np.arange(n_sensors)))
         nees.append(np.sum((estimate.mean - state[:, 0]) ** 2 / estimate.var))
     assert abs(np.mean(nees) - 2.0) < 5 * 2.0 / np.sqrt(n_episodes), np.mean(nees)
+
+
+def test_the_learnt_q_stops_on_its_floor():
+    """On S1's straight legs the window's likelihood climbs towards q = 0: log q reaches
+    the lower bound of PROCESS_NOISE_BOUNDS and is held there, never below (a Newton step
+    of up to 1 per step would carry it past the bound without the clip)."""
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
+    tracker = StateSpaceDGPT()
+    observation, info = env.reset(seed=1000)
+    tracker.reset(info["problem_spec"], seed=1000)
+    log_q, truncated = [], False
+    while not truncated:
+        estimate = tracker.update(observation)
+        log_q.append(tracker.log_q_.copy())
+        observation, _, _, truncated, _ = env.step(estimate.mean)
+    floor = np.log(PROCESS_NOISE_BOUNDS[0])
+    assert np.min(log_q) == floor
+    assert np.sum(np.array(log_q) == floor) > 10
