@@ -9,19 +9,33 @@ import gymnasium as gym
 
 from dgpt_gym.env import DGPTrackEnv
 from dgpt_gym.tracker import TrackerBase
-from dgpt_gym.validation import check_real
+from dgpt_gym.validation import check_choice, check_real
 
-__all__ = ["TrackerInsideEnv"]
+__all__ = ["TrackerInsideEnv", "LAYOUTS"]
+
+LAYOUTS = ("fixed", "per_episode")
+"""Where an RL environment's sensor layout comes from: ``"fixed"``, the inner env's
+``layout_seed`` in every episode; ``"per_episode"``, the reset seed, so that evaluation
+seeds 0-99 meet layouts that training seeds (1000 and up, or the training environments'
+10000 and up) never showed."""
 
 
 class TrackerInsideEnv(gym.Env, abc.ABC):
     """Base of the RL environments: owns the inner env (``self.inner``, which also draws the
     scene for ``render``), the tracker (``self.tracker``), the measurements of the coming
-    step (``self._pending``) and the error normalisation (``self.error_scale``)."""
+    step (``self._pending``), the error normalisation (``self.error_scale``) and where each
+    episode's sensor layout comes from (``self.layout``, one of :data:`LAYOUTS`)."""
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 
-    def __init__(self, tracker: TrackerBase, error_scale: float | None, env_kwargs: dict) -> None:
+    def __init__(
+        self,
+        tracker: TrackerBase,
+        error_scale: float | None,
+        env_kwargs: dict,
+        layout: str = "fixed",
+    ) -> None:
+        self.layout = check_choice("layout", layout, LAYOUTS)
         self.inner = DGPTrackEnv(**env_kwargs)  # render_mode goes to it: it draws the scene
         self.render_mode = self.inner.render_mode
         self.tracker = tracker
@@ -62,8 +76,17 @@ class TrackerInsideEnv(gym.Env, abc.ABC):
         self.inner.close()
 
     def _reset_inner(self, seed: int | None, options: dict | None) -> dict:
-        """Reset the inner env and the tracker; returns the inner reset info."""
+        """Reset the inner env (in the reset seed's layout with ``layout="per_episode"``)
+        and the tracker; returns the inner reset info."""
         gym.Env.reset(self, seed=seed)
+        if self.layout == "per_episode" and (options is None or isinstance(options, dict)):
+            # the reset seed, or (autoreset without a seed) a draw of this env's generator
+            # above the evaluation seeds, so that evaluation layouts stay unseen; other
+            # options (not a dict) go to the inner env, which names what it allows
+            layout_seed = (
+                int(seed) if seed is not None else int(self.np_random.integers(1000, 2**31))
+            )
+            options = {"layout_seed": layout_seed, **(options or {})}
         observation, info = self.inner.reset(seed=seed, options=options)
         self.tracker.reset(info["problem_spec"], seed=seed)
         self._pending = observation

@@ -115,8 +115,6 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         tracker_options: dict | None = None,
         **env_kwargs,
     ) -> None:
-        if layout not in ("per_episode", "fixed"):
-            raise ValueError(f"layout must be 'per_episode' or 'fixed'; got {layout!r}")
         env_kwargs.setdefault("trajectory", "random")
         options = {} if window is None else {"window": check_integer("window", window, low=1)}
         options.update(tracker_options or {})
@@ -126,8 +124,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
             raise ValueError(
                 f"tracker {tracker!r} takes no window argument ({error}); pass window=None"
             ) from None
-        super().__init__(inner_tracker, error_scale, env_kwargs)
-        self.layout = layout
+        super().__init__(inner_tracker, error_scale, env_kwargs, layout)
         self.wake_energy = check_real("wake_energy", wake_energy, low=0.0)
         self.startup_energy = check_real("startup_energy", startup_energy, low=0.0)
         self.energy_weight = check_real("energy_weight", energy_weight, low=0.0)
@@ -152,13 +149,6 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     # -- Gymnasium API ----------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        options = dict(options or {})
-        if self.layout == "per_episode" and "layout_seed" not in options:
-            # the reset seed, or (autoreset without a seed) a draw of this env's generator
-            # above the evaluation seeds, so that evaluation layouts stay unseen
-            options["layout_seed"] = (
-                int(seed) if seed is not None else int(self.np_random.integers(1000, 2**31))
-            )
         info = self._reset_inner(seed, options)
         n = self.inner.n_sensors
         self.battery_ = np.ones(n)

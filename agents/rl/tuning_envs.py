@@ -48,12 +48,13 @@ class TrackerTuningEnv(TrackerInsideEnv, abc.ABC):
         gate_threshold: float | None = None,
         compute_weight: float = 0.1,
         error_scale: float | None = None,
+        layout: str = "fixed",
         **env_kwargs,
     ) -> None:
         tracker = DGPT(
             aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
         )
-        super().__init__(tracker, error_scale, env_kwargs)
+        super().__init__(tracker, error_scale, env_kwargs, layout)
         self.max_window = check_integer("max_window", max_window, low=window)
         self.compute_weight = check_real("compute_weight", compute_weight, low=0.0)
         self.observation_space = spaces.Box(
@@ -150,7 +151,8 @@ class DGPTrackWindowEnv(TrackerTuningEnv):
 
     ## Starting State
 
-    The inner environment's reset (its scenario, seed and layout); the tracker starts
+    The inner environment's reset (its scenario, seed and layout; with
+    ``layout="per_episode"`` the layout drawn from the reset seed); the tracker starts
     empty.
 
     ## Episode End
@@ -166,6 +168,7 @@ class DGPTrackWindowEnv(TrackerTuningEnv):
     | ``inputs`` | ``"tgp"`` | ``"tgp"`` or ``"stgp"`` |
     | ``compute_weight`` | 0.1 | weight of the compute cost, >= 0 |
     | ``error_scale`` | sensing range | metres per unit of error penalty, > 0 |
+    | ``layout`` | ``"fixed"`` | ``"fixed"`` (``layout_seed``) or ``"per_episode"`` (from the reset seed; :data:`agents.rl.base.LAYOUTS`) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments (``scenario``, ``noise_std``, ``clutter_rate``, ...) |
     """
 
@@ -176,6 +179,7 @@ class DGPTrackWindowEnv(TrackerTuningEnv):
         inputs: str = "tgp",
         compute_weight: float = 0.1,
         error_scale: float | None = None,
+        layout: str = "fixed",
         **env_kwargs,
     ) -> None:
         windows = tuple(windows)
@@ -189,6 +193,7 @@ class DGPTrackWindowEnv(TrackerTuningEnv):
             max_window=max(self.windows),
             compute_weight=compute_weight,
             error_scale=error_scale,
+            layout=layout,
             **env_kwargs,
         )
         self.action_space = spaces.Discrete(len(self.windows))
@@ -248,6 +253,7 @@ class DGPTrackGatingEnv(TrackerTuningEnv):
     | ``aggregation``, ``inputs`` | ``"rbcm"``, ``"tgp"`` | the DGPT tracker |
     | ``compute_weight`` | 0.1 | weight of the compute cost, >= 0 |
     | ``error_scale`` | sensing range | metres per unit of error penalty, > 0 |
+    | ``layout`` | ``"fixed"`` | ``"fixed"`` (``layout_seed``) or ``"per_episode"`` (from the reset seed; :data:`agents.rl.base.LAYOUTS`) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments |
     """
 
@@ -262,6 +268,7 @@ class DGPTrackGatingEnv(TrackerTuningEnv):
         inputs: str = "tgp",
         compute_weight: float = 0.1,
         error_scale: float | None = None,
+        layout: str = "fixed",
         **env_kwargs,
     ) -> None:
         self.min_threshold = check_real(
@@ -279,6 +286,7 @@ class DGPTrackGatingEnv(TrackerTuningEnv):
             gate_threshold=self.max_threshold,
             compute_weight=compute_weight,
             error_scale=error_scale,
+            layout=layout,
             **env_kwargs,
         )
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)

@@ -31,12 +31,18 @@ def single_rollouts(env_id, n, actions, seed, **env_kwargs):
     return trace
 
 
-@pytest.mark.parametrize("env_id", RL_ENVS)
-def test_the_batched_vector_env_equals_single_envs_step_for_step(env_id):
+@pytest.mark.parametrize(
+    "env_id, layout",
+    [*((env_id, None) for env_id in RL_ENVS), ("DGPTrackWindow-v0", "per_episode")],
+)
+def test_the_batched_vector_env_equals_single_envs_step_for_step(env_id, layout):
     """Eight sub-environments over 160 steps, so that the shortest scenario's episodes
     (100 steps) end and autoreset; random actions make the trackers' windows, gates and
-    sensors differ, so the batched learning mixes different problems. Bit for bit."""
+    sensors differ, so the batched learning mixes different problems. Bit for bit; with
+    per-episode layouts too (the autoreset draws each sub-environment's next layout)."""
     n, steps, env_kwargs = 8, 160, {"scenario": "S3", "clutter_rate": 5.0}
+    if layout is not None:
+        env_kwargs.update(layout=layout, trajectory="random")
     if env_id == "DGPTrackGating-v0":  # and Gymnasium's time limit, which the batch keeps
         env_kwargs["max_episode_steps"] = 45
     vector = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **env_kwargs)
