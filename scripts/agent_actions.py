@@ -12,7 +12,7 @@ observation says:
   their predictions on average); otherwise 1-2 experts or 3 and more.
 
     python scripts/agent_actions.py models/sensors-v1-ppo-seed*
-    python scripts/agent_actions.py models/window-ppo
+    python scripts/agent_actions.py models/window-ppo-seed*
 """
 
 from __future__ import annotations

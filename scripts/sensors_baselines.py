@@ -28,8 +28,8 @@ one more row: the IQM over all their episodes (seeds x agents) with a bootstrap 
 by agent, as rliable does for several training runs.
 
 One environment configuration is one task, so rliable's stratified bootstrap reduces to a
-bootstrap over episodes (stratified by agent when several are pooled): ``scipy.stats.bootstrap``
-of the 25 %-trimmed mean gives the same interval without another dependency.
+bootstrap over episodes (stratified by agent when several are pooled): the statistics are
+:mod:`agents.rl.evaluation`'s, shared with ``scripts/tuning_baselines.py``.
 """
 
 from __future__ import annotations
@@ -39,11 +39,9 @@ import csv
 import json
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -52,10 +50,9 @@ import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.evaluation import (  # noqa: E402
-    ConstantPolicy,
-    ModelPolicy,
-    RandomPolicy,
-    run_policy_episode,
+    agents_against,
+    policy_cells,
+    run_policies,
 )
 from agents.rl.heuristics import (  # noqa: E402
     HEURISTIC_GRIDS,
@@ -63,7 +60,6 @@ from agents.rl.heuristics import (  # noqa: E402
     UncertaintyRadiusPolicy,
 )
 from agents.rl.registration import ENVIRONMENTS  # noqa: E402
-from agents.rl.training import load_agent  # noqa: E402
 
 ENV_IDS = tuple(
     environment.id
@@ -72,129 +68,6 @@ ENV_IDS = tuple(
 )
 """The sensor tasks this script evaluates: v1 and every id that fixes its arguments (v2)."""
 RULES = {"uncertainty radius": UncertaintyRadiusPolicy, "silence search": SilenceSearchPolicy}
-
-
-def make_policy(kind: str, setting, env: gym.Env, seed: int):
-    if kind == "agent":
-        model, config = load_agent(setting)
-        return ModelPolicy(model, config["normalizer"])
-    if kind == "constant":
-        return ConstantPolicy(setting)
-    if kind == "random":
-        return RandomPolicy(env.action_space, seed=seed)
-    return RULES[kind](**setting)
-
-
-def run_block(task):
-    """Episodes of one policy on some seeds (a worker's unit)."""
-    kind, setting, env_id, env_kwargs, seeds = task
-    env = gym.make(env_id, **env_kwargs)
-    rows = []
-    agent = make_policy(kind, setting, env, seeds[0]) if kind == "agent" else None
-    for seed in seeds:
-        policy = agent or make_policy(kind, setting, env, seed)
-        rows.append(run_policy_episode(env, policy, seed))
-    return rows
-
-
-def run_all(tasks, workers):
-    if workers == 1:
-        return [run_block(task) for task in tasks]
-    with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(run_block, tasks))
-
-
-def iqm_interval(*samples: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
-    """Interquartile mean of the pooled ``samples`` and its 95 % percentile-bootstrap
-    interval (2000 resamples). With several samples (the episodes of several agents) each
-    is resampled on its own, the bootstrap stratified by sample that rliable uses."""
-
-    def pooled_iqm(*resampled, axis=-1):
-        return stats.trim_mean(np.concatenate(resampled, axis=axis), 0.25, axis=axis)
-
-    result = stats.bootstrap(
-        samples,
-        pooled_iqm,
-        n_resamples=2000,
-        method="percentile",
-        rng=np.random.default_rng(seed),
-    )
-    interval = result.confidence_interval
-    return float(pooled_iqm(*samples)), float(interval.low), float(interval.high)
-
-
-def paired_iqm_difference(agents: np.ndarray, rule: np.ndarray, seed: int = 0):
-    """IQM of the agents' returns (n_agents, n_seeds) minus the IQM of the rule's (n_seeds,)
-    on the same seeds, with a 95 % percentile-bootstrap interval that resamples the seeds
-    (the same ones for every agent and the rule: paired). Returns (difference, low, high)."""
-
-    def difference(*resampled, axis=-1):
-        pooled = np.concatenate(resampled[:-1], axis=axis)
-        return stats.trim_mean(pooled, 0.25, axis=axis) - stats.trim_mean(
-            resampled[-1], 0.25, axis=axis
-        )
-
-    result = stats.bootstrap(
-        (*agents, rule),
-        difference,
-        paired=True,
-        n_resamples=2000,
-        method="percentile",
-        rng=np.random.default_rng(seed),
-    )
-    interval = result.confidence_interval
-    return float(difference(*agents, rule)), float(interval.low), float(interval.high)
-
-
-def paired_interval(differences: np.ndarray) -> tuple[float, float]:
-    """Mean of paired differences and the half-width of its Student-t 95 % interval."""
-    sem = differences.std(ddof=1) / np.sqrt(differences.size)
-    return float(differences.mean()), float(sem * stats.t.ppf(0.975, differences.size - 1))
-
-
-def _pooled(by_name: dict, agents: list[str], reference: np.ndarray) -> str:
-    """The table cells of several trained agents together: the IQM over every (agent, seed)
-    episode with its bootstrap stratified by agent (:func:`iqm_interval`), the mean, and
-    the paired difference of the agents' mean return per seed to ``reference``."""
-    returns = np.array([[row["return"] for row in by_name[name]] for name in agents])
-    iqm, low, high = iqm_interval(*returns)
-    difference, half = paired_interval(returns.mean(axis=0) - reference)
-    nrmse = 100 * np.mean([[row["nrmse"] for row in by_name[name]] for name in agents])
-    per_step = np.mean([[row["per_step"] for row in by_name[name]] for name in agents])
-    return (
-        f"{iqm:.1f} [{low:.1f}, {high:.1f}] | {returns.mean():.1f} | {nrmse:.2f} | "
-        f"{per_step:.1f} | {difference:+.1f} +- {half:.1f}"
-    )
-
-
-def _against_each_rule(by_name: dict, agents: list[str], rules: list[str]) -> list[str]:
-    """Table lines: the agents' mean per-seed return and sensors per step, paired with each
-    adaptive rule's on the same seeds (the comparison the training-chosen best rule alone
-    does not settle when another rule does better on the evaluation seeds)."""
-
-    def per_seed(names, key):
-        return np.mean([[row[key] for row in by_name[name]] for name in names], axis=0)
-
-    lines = [
-        "",
-        f"The {len(agents)} agents together against each adaptive rule, paired by seed: the "
-        "IQM of the agents' returns minus the rule's with a 95 % bootstrap interval over seeds "
-        "(the same seeds resampled for both), and mean differences with 95 % t intervals:",
-        "",
-        "| rule | IQM return: agents - rule [95 % CI] | mean return: agents - rule | "
-        "sensors per step: agents - rule |",
-        "|---|---|---|---|",
-    ]
-    returns = np.array([[row["return"] for row in by_name[name]] for name in agents])
-    for rule in rules:
-        rule_returns = np.array([row["return"] for row in by_name[rule]])
-        iqm, low, high = paired_iqm_difference(returns, rule_returns)
-        cells = [f"{iqm:+.1f} [{low:+.1f}, {high:+.1f}]"]
-        for key in ("return", "per_step"):
-            difference, half = paired_interval(per_seed(agents, key) - per_seed([rule], key))
-            cells.append(f"{difference:+.1f} +- {half:.1f}")
-        lines.append(f"| {rule} | {' | '.join(cells)} |")
-    return lines
 
 
 def training_table(args, env, env_kwargs: dict, version: str) -> int:
@@ -210,8 +83,8 @@ def training_table(args, env, env_kwargs: dict, version: str) -> int:
             policies[f"{kind} ({label})"] = (kind, setting)
     seeds = list(range(1000, 1000 + args.training_seeds))
     names = list(policies)
-    results = run_all(
-        [(*policies[name], args.env, env_kwargs, seeds) for name in names], args.workers
+    results = run_policies(
+        [policies[name] for name in names], args.env, env_kwargs, seeds, args.workers, RULES
     )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"training_returns_{version}.csv"
@@ -260,7 +133,7 @@ def main(argv=None) -> int:
     # 1. the rules' settings on training seeds
     training = list(range(1000, 1000 + args.training_seeds))
     tuning = [(kind, setting) for kind, grid in HEURISTIC_GRIDS.items() for setting in grid]
-    results = run_all([(k, s, args.env, env_kwargs, training) for k, s in tuning], args.workers)
+    results = run_policies(tuning, args.env, env_kwargs, training, args.workers, RULES)
     best = {}
     for (kind, setting), rows in zip(tuning, results):
         score = float(np.mean([row["return"] for row in rows]))
@@ -283,8 +156,8 @@ def main(argv=None) -> int:
             parser.error(f"{folder} was trained on {config['env']} {config['env_kwargs']}")
         policies[f"agent {folder.name}"] = ("agent", folder)
     names = list(policies)
-    results = run_all(
-        [(*policies[name], args.env, env_kwargs, evaluation) for name in names], args.workers
+    results = run_policies(
+        [policies[name] for name in names], args.env, env_kwargs, evaluation, args.workers, RULES
     )
     by_name = dict(zip(names, results))
     agents = [name for name in names if policies[name][0] == "agent"]
@@ -313,26 +186,31 @@ def main(argv=None) -> int:
     points = []
     if agents:
         lines.append(
-            f"| **{len(agents)} agents together** | {_pooled(by_name, agents, reference)} |"
+            f"| **{len(agents)} agents together** | {policy_cells(by_name, agents, reference)} |"
         )
     for name in names:
+        cells = policy_cells(by_name, [name], reference, is_reference=name == best_rule)
+        lines.append(f"| {name} | {cells} |")
         rows = by_name[name]
-        returns = np.array([row["return"] for row in rows])
-        iqm, low, high = iqm_interval(returns)
-        difference, half = paired_interval(returns - reference)
         per_step = float(np.mean([row["per_step"] for row in rows]))
         error = float(np.mean([row["mean_error"] for row in rows]))
-        nrmse = 100 * float(np.mean([row["nrmse"] for row in rows]))
-        paired = "-" if name == best_rule else f"{difference:+.1f} +- {half:.1f}"
-        lines.append(
-            f"| {name} | {iqm:.1f} [{low:.1f}, {high:.1f}] | {returns.mean():.1f} | "
-            f"{nrmse:.2f} | {per_step:.1f} | {paired} |"
-        )
         points.append((name, per_step, error))
     if agents:
-        lines += _against_each_rule(
-            by_name, agents, [n for n in names if policies[n][0] in HEURISTIC_GRIDS]
-        )
+        lines += [
+            "",
+            f"The {len(agents)} agents together against each adaptive rule, paired by seed: the "
+            "IQM of the agents' returns minus the rule's with a 95 % bootstrap interval over "
+            "seeds (the same seeds resampled for both), and mean differences with 95 % t "
+            "intervals:",
+            "",
+            *agents_against(
+                by_name,
+                agents,
+                [n for n in names if policies[n][0] in HEURISTIC_GRIDS],
+                "sensors per step",
+                what="rule",
+            ),
+        ]
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     table = args.out / f"rl_sensors_{version}.md"

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.rl.evaluation import iqm_interval, paired_iqm_difference
 from agents.rl.heuristics import HEURISTIC_GRIDS
 from dgpt_gym.benchmark.cli import with_inputs
 
@@ -210,31 +211,62 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
     result = run_script("agent_actions.py", model, "--seeds", "1")
     assert result.returncode == 0, result.stderr
     assert "| after a silent step |" in result.stdout and "| sigma < 10 m |" in result.stdout
-    result = run_script("agent_actions.py", str(ROOT / "models" / "window-ppo"), "--seeds", "1")
+    result = run_script(
+        "agent_actions.py", str(ROOT / "models" / "window-ppo-seed0"), "--seeds", "1"
+    )
     assert result.returncode == 0, result.stderr
     assert "mean window" in result.stdout and "| 3+ experts |" in result.stdout
 
 
-def test_the_paired_iqm_difference_pairs_the_seeds():
-    """scripts/sensors_baselines.py's paired bootstrap of IQM(agents) - IQM(rule): agents
-    that add exactly 5 to the rule's return on every seed give 5 with a zero-width
-    interval, whatever the spread over seeds (a bootstrap that resampled the two sides
-    independently would give an interval about +-2 wide here); with noise of standard
-    deviation 1 per (agent, seed) the interval still covers 5 and is far narrower than the
-    seeds' spread of 10."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "sensors_baselines", ROOT / "scripts" / "sensors_baselines.py"
+def test_tuning_baselines_runs_on_a_few_seeds_and_refuses_other_tasks_agents(tmp_path):
+    """The script behind docs/rl_window_v0.md on 2 evaluation seeds (the documented run uses
+    100): every fixed window, the random policy, the agent and the agents together have a
+    row, the best fixed setting is marked, the paired table compares the agents with it,
+    and the figure is written. An agent trained on another task is refused, naming it."""
+    model = str(ROOT / "models" / "window-ppo-seed0")
+    common = ["--seeds", "2", "--training-seeds", "1", "--workers", "1", "--out", str(tmp_path)]
+    common += ["--cache", str(tmp_path / "cache")]
+    result = run_script("tuning_baselines.py", *common, "--models", model)
+    assert result.returncode == 0, result.stderr
+    table = (tmp_path / "rl_window_v0.md").read_text()
+    for window in (2, 3, 4, 5, 6, 8, 10, 14, 20):
+        assert f"| fixed C={window}" in table
+    for row in ("| random |", "| agent window-ppo-seed0 |", "| **1 agents together** |"):
+        assert row in table
+    assert table.count("(best fixed, training seeds)") == 1 and "(default)" in table
+    assert "| setting | IQM return: agents - setting [95 % CI] |" in table
+    assert (tmp_path / "figures" / "rl_window_v0.png").stat().st_size > 10_000
+    refused = run_script(
+        "tuning_baselines.py", *common, "--env-kwargs", "scenario=S1", "--models", model
     )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    assert refused.returncode == 2 and "window-ppo-seed0 was trained on" in refused.stderr
+
+
+def test_the_paired_iqm_difference_pairs_the_seeds():
+    """agents.rl.evaluation's paired bootstrap of IQM(agents) - IQM(reference), which the
+    RL tables quote: agents that add exactly 5 to the reference's return on every seed
+    give 5 with a zero-width interval, whatever the spread over seeds (a bootstrap that
+    resampled the two sides independently would give an interval about +-2 wide here);
+    with noise of standard deviation 1 per (agent, seed) the interval still covers 5 and
+    is far narrower than the seeds' spread of 10."""
     rng = np.random.default_rng(3)
     rule = 10.0 * rng.normal(size=100)
-    exact = module.paired_iqm_difference(np.stack([rule + 5.0] * 5), rule)
+    exact = paired_iqm_difference(np.stack([rule + 5.0] * 5), rule)
     np.testing.assert_allclose(exact, (5.0, 5.0, 5.0), rtol=0, atol=1e-9)
-    noisy = module.paired_iqm_difference(np.stack([rule + 5.0 + rng.normal(size=100)] * 5), rule)
+    noisy = paired_iqm_difference(np.stack([rule + 5.0 + rng.normal(size=100)] * 5), rule)
     assert noisy[1] < 5.0 < noisy[2] and noisy[2] - noisy[1] < 1.0
+
+
+def test_the_iqm_interval_is_stratified_by_agent():
+    """The IQM is the mean of the middle half (1..8: 4.5, by hand). Two agents, one always
+    returning 0 and one always 10: resampling within each agent keeps half of the pooled
+    episodes at 0 and half at 10, so every resample's IQM is 5 and the interval has zero
+    width; a bootstrap over the pooled episodes would draw unequal halves and spread."""
+    np.testing.assert_allclose(iqm_interval(np.arange(1.0, 9.0))[0], 4.5, rtol=0, atol=1e-12)
+    stratified = iqm_interval(np.zeros(40), np.full(40, 10.0))
+    np.testing.assert_allclose(stratified, (5.0, 5.0, 5.0), rtol=0, atol=1e-12)
+    pooled = iqm_interval(np.r_[np.zeros(40), np.full(40, 10.0)])
+    assert pooled[0] == 5.0 and pooled[2] - pooled[1] > 1.0
 
 
 def test_model_study_pairs_runs_by_cell_and_seed():

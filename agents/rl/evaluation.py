@@ -2,12 +2,27 @@
 
 A policy is anything with ``predict(observation) -> action``; trained Stable-Baselines3
 models are wrapped by :class:`ModelPolicy`. :func:`evaluate_policy_on_seeds` runs one
-episode per seed (``reset(seed=s)``), so every policy meets the same measurements.
+episode per seed (``reset(seed=s)``), so every policy meets the same measurements;
+:func:`run_policies` does that for several policies in worker processes.
+
+The statistics of the evaluation protocol (``scripts/sensors_baselines.py``,
+``scripts/tuning_baselines.py``): the interquartile mean (IQM) of the episode returns with a
+95 % percentile-bootstrap interval, stratified by agent when several trained agents are
+pooled (:func:`iqm_interval`), as the rliable library computes it for several training runs on
+one task; its paired difference between policies on shared seeds
+(:func:`paired_iqm_difference`); and the Student-t interval of a mean paired difference
+(:func:`paired_interval`). ``scipy.stats.bootstrap`` of the 25 %-trimmed mean gives these
+without another dependency.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 from collections.abc import Iterable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -25,6 +40,11 @@ __all__ = [
     "run_policy_episode",
     "evaluate_policy_on_seeds",
     "summarize_episodes",
+    "make_policy",
+    "run_policies",
+    "iqm_interval",
+    "paired_iqm_difference",
+    "paired_interval",
     "TRAINING_SEEDS",
     "EVALUATION_SEEDS",
 ]
@@ -126,3 +146,216 @@ def summarize_episodes(episodes: list[dict], confidence: float = 0.95) -> dict[s
         else:
             summary[f"{key}_ci"] = float("nan")
     return summary
+
+
+def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None = None):
+    """A policy from a picklable description: ``kind`` ``"agent"`` (``setting`` the folder
+    :func:`agents.rl.training.train_agent` wrote), ``"constant"`` (``setting`` the action),
+    ``"random"`` (seeded with ``seed``), or a key of ``rules`` (a policy class called with
+    the ``setting`` dict as keyword arguments)."""
+    if kind == "agent":
+        from agents.rl.training import load_agent
+
+        model, config = load_agent(setting)
+        return ModelPolicy(model, config["normalizer"])
+    if kind == "constant":
+        return ConstantPolicy(setting)
+    if kind == "random":
+        return RandomPolicy(env.action_space, seed=seed)
+    if rules is None or kind not in rules:
+        allowed = ["agent", "constant", "random", *(rules or {})]
+        raise ValueError(f"kind must be one of {allowed}; got {kind!r}")
+    return rules[kind](**setting)
+
+
+def _run_block(task) -> list[dict]:
+    """Episodes of one policy on some seeds (a worker's unit): an agent is loaded once, a
+    random policy or rule is made afresh for each seed (the random one seeded with it)."""
+    kind, setting, env_id, env_kwargs, seeds, rules = task
+    env = gym.make(env_id, **env_kwargs)
+    agent = make_policy(kind, setting, env, seeds[0]) if kind == "agent" else None
+    rows = []
+    for seed in seeds:
+        policy = agent or make_policy(kind, setting, env, seed, rules)
+        rows.append(run_policy_episode(env, policy, seed))
+    env.close()
+    return rows
+
+
+def _cache_file(cache: Path, task) -> Path:
+    """Where a task's rows are kept: named by a hash of the package version, the policy
+    (an agent by the bytes of its folder's files), the environment and the seeds."""
+    import dgpt_gym
+
+    kind, setting, env_id, env_kwargs, seeds, _ = task
+    if kind == "agent":
+        digest = hashlib.sha256()
+        for path in sorted(Path(setting).iterdir()):
+            digest.update(path.name.encode() + path.read_bytes())
+        setting = digest.hexdigest()
+    elif isinstance(setting, np.ndarray):
+        setting = setting.tolist()
+    key = json.dumps(
+        [dgpt_gym.__version__, kind, setting, env_id, env_kwargs, seeds],
+        sort_keys=True,
+        default=str,
+    )
+    return cache / f"{kind}-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
+
+
+def _run_cached(task_and_cache) -> list[dict]:
+    """:func:`_run_block`, its rows read from or written to the cache folder if one is given."""
+    task, cache = task_and_cache
+    if cache is None:
+        return _run_block(task)
+    path = _cache_file(cache, task)
+    if path.exists():
+        return json.loads(path.read_text())
+    rows = _run_block(task)
+    temporary = path.with_suffix(".tmp")
+    temporary.write_text(json.dumps(rows))
+    temporary.replace(path)  # a run interrupted while writing leaves no half file
+    return rows
+
+
+def run_policies(
+    policies: list[tuple[str, object]],
+    env_id: str,
+    env_kwargs: dict,
+    seeds: Iterable[int],
+    workers: int | None = None,
+    rules: dict | None = None,
+    cache: str | Path | None = None,
+) -> list[list[dict]]:
+    """:func:`run_policy_episode` rows of every policy (``(kind, setting)`` as
+    :func:`make_policy` takes them) on every seed, one list per policy in order; a process
+    pool of ``workers`` (default: the CPU count; 1 runs here) takes one policy each. With a
+    ``cache`` folder each policy's rows are kept there as they finish and read back by a
+    later call with the same version, policy, environment and seeds, so an interrupted run
+    loses no finished policy."""
+    seeds = [int(seed) for seed in seeds]
+    if cache is not None:
+        cache = Path(cache)
+        cache.mkdir(parents=True, exist_ok=True)
+    tasks = [
+        ((kind, setting, env_id, env_kwargs, seeds, rules), cache) for kind, setting in policies
+    ]
+    workers = workers or os.cpu_count() or 1
+    if workers == 1:
+        return [_run_cached(task) for task in tasks]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_run_cached, tasks))
+
+
+def iqm_interval(*samples: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
+    """Interquartile mean of the pooled ``samples`` and its 95 % percentile-bootstrap
+    interval (2000 resamples). With several samples (the episodes of several agents) each
+    is resampled on its own, the bootstrap stratified by sample that rliable uses."""
+
+    def pooled_iqm(*resampled, axis=-1):
+        return stats.trim_mean(np.concatenate(resampled, axis=axis), 0.25, axis=axis)
+
+    result = stats.bootstrap(
+        samples,
+        pooled_iqm,
+        n_resamples=2000,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    interval = result.confidence_interval
+    return float(pooled_iqm(*samples)), float(interval.low), float(interval.high)
+
+
+def paired_iqm_difference(agents: np.ndarray, reference: np.ndarray, seed: int = 0):
+    """IQM of the agents' returns (n_agents, n_seeds) minus the IQM of a reference policy's
+    (n_seeds,) on the same seeds, with a 95 % percentile-bootstrap interval that resamples
+    the seeds (the same ones for every agent and the reference: paired). Returns
+    (difference, low, high)."""
+
+    def difference(*resampled, axis=-1):
+        pooled = np.concatenate(resampled[:-1], axis=axis)
+        return stats.trim_mean(pooled, 0.25, axis=axis) - stats.trim_mean(
+            resampled[-1], 0.25, axis=axis
+        )
+
+    result = stats.bootstrap(
+        (*agents, reference),
+        difference,
+        paired=True,
+        n_resamples=2000,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    interval = result.confidence_interval
+    return float(difference(*agents, reference)), float(interval.low), float(interval.high)
+
+
+def paired_interval(differences: np.ndarray) -> tuple[float, float]:
+    """Mean of paired differences and the half-width of its Student-t 95 % interval."""
+    sem = differences.std(ddof=1) / np.sqrt(differences.size)
+    return float(differences.mean()), float(sem * stats.t.ppf(0.975, differences.size - 1))
+
+
+def _per_seed(by_name: dict, names: list[str], key: str) -> np.ndarray:
+    """``key`` of every episode of the policies ``names``: (len(names), n_seeds)."""
+    return np.array([[row[key] for row in by_name[name]] for name in names], dtype=float)
+
+
+def policy_cells(
+    by_name: dict,
+    names: list[str],
+    reference: np.ndarray,
+    digits: int = 1,
+    knob_digits: int = 1,
+    is_reference: bool = False,
+) -> str:
+    """Markdown cells of one policy (``names`` of one) or of several trained agents
+    together (their episodes pooled): the IQM return with its 95 % bootstrap interval
+    (stratified by agent, :func:`iqm_interval`), the mean return, the NRMSE (%), the mean
+    knob per step, and the mean per-seed return minus ``reference``'s (the reference
+    policy's returns on the same seeds) with its t interval ("-" for the reference itself,
+    ``is_reference``). ``by_name`` maps a policy's name to its
+    :func:`run_policy_episode` rows, seeds in the same order for every policy."""
+    returns = _per_seed(by_name, names, "return")
+    iqm, low, high = iqm_interval(*returns)
+    if is_reference:
+        paired = "-"
+    else:
+        difference, half = paired_interval(returns.mean(axis=0) - reference)
+        paired = f"{difference:+.{digits}f} +- {half:.{digits}f}"
+    nrmse = 100 * _per_seed(by_name, names, "nrmse").mean()
+    knob = _per_seed(by_name, names, "per_step").mean()
+    return (
+        f"{iqm:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}] | {returns.mean():.{digits}f} | "
+        f"{nrmse:.2f} | {knob:.{knob_digits}f} | {paired}"
+    )
+
+
+def agents_against(
+    by_name: dict,
+    agents: list[str],
+    others: list[str],
+    knob_label: str,
+    what: str = "policy",
+    digits: int = 1,
+) -> list[str]:
+    """Markdown table lines: the trained ``agents`` together against each of ``others``,
+    paired by seed: the IQM of the agents' returns minus the other's with a 95 % bootstrap
+    interval over seeds (:func:`paired_iqm_difference`), and the differences of the mean
+    return and of the knob per step (``knob_label``) with 95 % t intervals; ``what`` names
+    the others in the header."""
+    returns = _per_seed(by_name, agents, "return")
+    lines = [
+        f"| {what} | IQM return: agents - {what} [95 % CI] | mean return: agents - {what} | "
+        f"{knob_label}: agents - {what} |",
+        "|---|---|---|---|",
+    ]
+    for other in others:
+        iqm, low, high = paired_iqm_difference(returns, _per_seed(by_name, [other], "return")[0])
+        cells = [f"{iqm:+.{digits}f} [{low:+.{digits}f}, {high:+.{digits}f}]"]
+        for key in ("return", "per_step"):
+            mine = _per_seed(by_name, agents, key).mean(axis=0)
+            difference, half = paired_interval(mine - _per_seed(by_name, [other], key)[0])
+            cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
+        lines.append(f"| {other} | {' | '.join(cells)} |")
+    return lines

@@ -63,6 +63,7 @@ def test_vector_envs(env_id):
     [
         ("DGPTrackWindow-v0", {"windows": [0]}, "windows"),
         ("DGPTrackWindow-v0", {"compute_weight": -1.0}, "compute_weight"),
+        ("DGPTrackWindow-v0", {"layout": "random"}, "layout"),
         ("DGPTrackGating-v0", {"min_threshold": 0.0}, "min_threshold"),
         ("DGPTrackGating-v0", {"min_threshold": 5.0, "max_threshold": 2.0}, "max_threshold"),
         ("DGPTrackSensors-v0", {"n_candidates": 0}, "n_candidates"),
@@ -75,6 +76,32 @@ def test_vector_envs(env_id):
 def test_arguments_are_validated(env_id, kwargs, name):
     with pytest.raises(ValueError, match=name):
         gym.make(env_id, **kwargs)
+
+
+@pytest.mark.parametrize("env_id", ["DGPTrackWindow-v0", "DGPTrackGating-v0"])
+def test_a_per_episode_layout_comes_from_the_reset_seed(env_id):
+    """layout="per_episode": seed s's layout is DGPTrack-v0's with layout_seed=s, another
+    seed gives another, the same seed the same, and a reset without a seed (an autoreset)
+    draws a layout seed above the evaluation seeds; layout="fixed" (the default) keeps
+    one layout whatever the seed."""
+    env = gym.make(env_id, scenario="S3", trajectory="random", layout="per_episode").unwrapped
+    env.reset(seed=3)
+    layout = env.inner.network.positions.copy()
+    reference = gym.make("DGPTrack-v0", scenario="S3", layout_seed=3).unwrapped
+    reference.reset(seed=0)
+    np.testing.assert_array_equal(layout, reference.network.positions)
+    env.reset(seed=4)
+    assert not np.array_equal(layout, env.inner.network.positions)
+    env.reset(seed=3)
+    np.testing.assert_array_equal(layout, env.inner.network.positions)
+    env.reset()
+    assert env.inner.layout_seed >= 1000
+    fixed = gym.make(env_id, scenario="S3").unwrapped
+    fixed.reset(seed=3)
+    first = fixed.inner.network.positions.copy()
+    fixed.reset(seed=4)
+    np.testing.assert_array_equal(first, fixed.inner.network.positions)
+    assert fixed.inner.layout_seed == 0
 
 
 def test_window_reward_is_error_plus_cubic_compute_cost():
@@ -225,3 +252,50 @@ def test_saved_model_loads_and_reproduces_its_actions(tmp_path):
 def test_dqn_needs_a_discrete_action_space(tmp_path):
     with pytest.raises(ValueError, match="dqn"):
         train_agent("DGPTrackSensors-v0", "dqn", timesteps=10, out=tmp_path, progress=False)
+
+
+@pytest.mark.parametrize(
+    "name, env_id", [("window", "DGPTrackWindow-v0"), ("gating", "DGPTrackGating-v0")]
+)
+def test_the_committed_tuning_agents_load_and_act(name, env_id):
+    """models/ holds the five window and five gating agents docs/rl.md quotes, each at most
+    1 MB; they load with their frozen normaliser, were trained on random paths in
+    per-episode layouts, and act on raw observations of that environment."""
+    from pathlib import Path
+
+    models = Path(__file__).parents[3] / "models"
+    folders = sorted(models.glob(f"{name}-ppo-seed*"))
+    assert [folder.name for folder in folders] == [f"{name}-ppo-seed{s}" for s in range(5)]
+    for folder in folders:
+        assert sum(f.stat().st_size for f in folder.iterdir()) <= 1_000_000
+    model, config = load_agent(folders[0])
+    assert config["env"] == env_id and config["normalizer"] is not None
+    assert config["env_kwargs"]["trajectory"] == "random"
+    assert config["env_kwargs"]["layout"] == "per_episode"
+    policy = ModelPolicy(model, config["normalizer"])
+    env = gym.make(env_id, **config["env_kwargs"])
+    observation, _ = env.reset(seed=0)
+    for _ in range(5):
+        action = policy.predict(observation)
+        assert env.action_space.contains(action)
+        observation, *_ = env.step(action)
+
+
+def test_run_policies_keeps_each_policys_episodes_and_reads_them_back(tmp_path, monkeypatch):
+    """With a cache folder, a policy's rows are written once and a second call with the same
+    policy, environment and seeds reads them back without running an episode; other seeds
+    are another key and run."""
+    from agents.rl import evaluation
+
+    arguments = ("DGPTrackWindow-v0", {"scenario": "S3", "max_episode_steps": 5})
+    rows = evaluation.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
+    assert len(list(tmp_path.glob("*.json"))) == 1 and len(rows[0]) == 2
+
+    def no_episodes(task):
+        raise AssertionError("ran an episode")
+
+    monkeypatch.setattr(evaluation, "_run_block", no_episodes)
+    again = evaluation.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
+    assert again == rows
+    with pytest.raises(AssertionError, match="ran an episode"):
+        evaluation.run_policies([("constant", 1)], *arguments, [0, 2], 1, cache=tmp_path)

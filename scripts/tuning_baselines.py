@@ -1,0 +1,243 @@
+"""The window and gating tasks' fixed settings and trained agents on held-out seeds, with IQM
+intervals.
+
+1. Runs every fixed setting of the task (``fixed_actions()``: every window length C, or nine
+   gate thresholds) on the training seeds (1000 onwards) and keeps the one with the best
+   mean return, the "best fixed setting".
+2. Runs every fixed setting, a random policy and each trained agent (``--models``, folders
+   of ``scripts/train_rl.py``, evaluated without training) on the evaluation seeds 0..N-1.
+   With the default ``trajectory=random layout=per_episode`` these are paths and sensor
+   layouts that no training episode used.
+3. Writes docs/rl_window_v0.md or docs/rl_gating_v0.md: the interquartile mean (IQM) of the
+   episode return with a 95 % bootstrap interval (stratified by agent for the agents
+   together), mean return, NRMSE, the mean knob per step, the paired difference to the
+   best fixed setting seed by seed, and the agents' paired IQM and mean differences to the
+   best fixed and the default setting; and docs/figures/rl_window_v0.png (or gating): the
+   IQM return of every policy against its mean knob.
+
+    python scripts/tuning_baselines.py --env DGPTrackWindow-v0 --models models/window-ppo-seed*
+    python scripts/tuning_baselines.py --env DGPTrackGating-v0 --models models/gating-ppo-seed*
+    python scripts/tuning_baselines.py --env DGPTrackWindow-v0 --seeds 20 --training-seeds 5
+
+The statistics are :mod:`agents.rl.evaluation`'s (shared with ``scripts/sensors_baselines.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+
+import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.cli import parse_kwargs  # noqa: E402
+from agents.rl.evaluation import agents_against, policy_cells, run_policies  # noqa: E402
+
+ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
+DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
+"""The documented task: S3 at clutter rate 5, a random path in a layout drawn from the seed."""
+KNOB_LABELS = {"window": "mean window C", "gate_threshold": "mean gate threshold"}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS, help="the task")
+    parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
+    parser.add_argument("--training-seeds", type=int, default=20, help="seeds 1000..")
+    parser.add_argument(
+        "--env-kwargs",
+        nargs="*",
+        default=DEFAULT_ENV_KWARGS,
+        metavar="KEY=VALUE",
+        help=f"environment arguments (default: {' '.join(DEFAULT_ENV_KWARGS)})",
+    )
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--out", type=Path, default=ROOT / "docs")
+    parser.add_argument(
+        "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
+    )
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=ROOT / "results" / "rl" / "tuning_baselines",
+        help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
+        "interrupted run) reuses them (default: results/rl/tuning_baselines)",
+    )
+    args = parser.parse_args(argv)
+    if args.seeds < 2 or args.training_seeds < 1:
+        parser.error("--seeds must be >= 2 and --training-seeds >= 1")
+    try:
+        env_kwargs = parse_kwargs(args.env_kwargs)
+        env = gym.make(args.env, **env_kwargs)
+    except (TypeError, ValueError) as error:
+        parser.error(f"--env-kwargs: {error}")
+    for folder in args.models:
+        config = json.loads((folder / "config.json").read_text())
+        if config["env"] != args.env or config["env_kwargs"] != env_kwargs:
+            parser.error(
+                f"{folder} was trained on {config['env']} {config['env_kwargs']}, "
+                f"not {args.env} {env_kwargs}"
+            )
+    constants, default = env.unwrapped.fixed_actions()
+    knob = env.unwrapped.knob
+    env.close()
+
+    # 1. the best fixed setting on training seeds
+    training = range(1000, 1000 + args.training_seeds)
+    fixed = [("constant", action) for action in constants.values()]
+    scores = {
+        name: float(np.mean([row["return"] for row in rows]))
+        for name, rows in zip(
+            constants,
+            run_policies(fixed, args.env, env_kwargs, training, args.workers, cache=args.cache),
+        )
+    }
+    best = max(scores, key=scores.get)
+    for name, score in scores.items():
+        print(f"training  {name:28s} mean return {score:9.2f}")
+
+    # 2. every policy on the evaluation seeds
+    policies = {name: ("constant", action) for name, action in constants.items()}
+    policies["random"] = ("random", None)
+    for folder in args.models:
+        policies[f"agent {folder.name}"] = ("agent", folder)
+    names = list(policies)
+    results = run_policies(
+        [policies[name] for name in names],
+        args.env,
+        env_kwargs,
+        range(args.seeds),
+        args.workers,
+        cache=args.cache,
+    )
+    by_name = dict(zip(names, results))
+    agents = [name for name in names if policies[name][0] == "agent"]
+
+    # 3. the tables and the figure
+    knob_label = KNOB_LABELS.get(knob, f"mean {knob}")
+    command = (
+        f"python scripts/tuning_baselines.py --env {args.env}"
+        + (f" --seeds {args.seeds}" if args.seeds != 100 else "")
+        + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
+        + (
+            f" --env-kwargs {' '.join(args.env_kwargs)}"
+            if args.env_kwargs != DEFAULT_ENV_KWARGS
+            else ""
+        )
+        + (" --models " + " ".join(str(path) for path in args.models) if args.models else "")
+    )
+    reference = np.array([row["return"] for row in by_name[best]])
+    lines = [
+        f"# {args.env}: fixed settings and agents ({', '.join(args.env_kwargs)})",
+        "",
+        f"Generated by `{command}`. The best fixed setting, **{best}**, has the best mean "
+        f"return on the training seeds 1000-{999 + args.training_seeds}; every row is on the "
+        f"evaluation seeds 0-{args.seeds - 1}. IQM: interquartile mean of the episode returns "
+        "with a 95 % bootstrap interval; paired: the mean per-seed return difference to the "
+        "best fixed setting with a 95 % t interval.",
+        "",
+        f"| policy | IQM return [95 % CI] | mean return | NRMSE % | {knob_label} | "
+        "paired - best fixed |",
+        "|---|---|---|---|---|---|",
+    ]
+    if agents:
+        cells = policy_cells(by_name, agents, reference, digits=2, knob_digits=2)
+        lines.append(f"| **{len(agents)} agents together** | {cells} |")
+    for name in names:
+        cells = policy_cells(
+            by_name, [name], reference, digits=2, knob_digits=2, is_reference=name == best
+        )
+        role = " (best fixed, training seeds)" if name == best else ""
+        role += " (default)" if name == default else ""
+        lines.append(f"| {name}{role} | {cells} |")
+    if agents:
+        others = [best] if default == best else [best, default]
+        lines += [
+            "",
+            f"The {len(agents)} agents together against the best fixed setting and the "
+            "default, paired by seed (the IQM difference with a bootstrap that resamples the "
+            "same seeds for both sides; mean differences with 95 % t intervals):",
+            "",
+            *agents_against(by_name, agents, others, knob_label, what="setting", digits=2),
+        ]
+    text = "\n".join(lines) + "\n"
+    slug = args.env.removeprefix("DGPTrack").lower().replace("-", "_")
+    args.out.mkdir(parents=True, exist_ok=True)
+    table = args.out / f"rl_{slug}.md"
+    table.write_text(text)
+    print(text)
+
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from agents.rl.evaluation import iqm_interval
+
+    figure, axis = plt.subplots(figsize=(6.5, 4.2))
+    points = {}
+    for name in names:
+        returns = np.array([row["return"] for row in by_name[name]])
+        knob_mean = float(np.mean([row["per_step"] for row in by_name[name]]))
+        points[name] = (knob_mean, *iqm_interval(returns))
+    # the chart shows the policies near the best; those far below (tight gates that lose
+    # the target) are named under it rather than squeezing the others into a line
+    _, _, random_low, _ = points["random"]
+    best_iqm = max(iqm for _, iqm, _, _ in points.values())
+    floor = random_low - 0.5 * (best_iqm - random_low)
+    below = [name for name, (_, iqm, _, _) in points.items() if iqm < floor]
+    style = {
+        "constant": dict(fmt="o", color="0.45"),
+        "random": dict(fmt="x", color="k"),
+        "agent": dict(fmt="D", color="C3"),
+    }
+    for name, (knob_mean, iqm, low, high) in points.items():
+        if name in below:
+            continue
+        kind = policies[name][0]
+        axis.errorbar(
+            knob_mean, iqm, yerr=[[iqm - low], [high - iqm]], ms=5, capsize=2, **style[kind]
+        )
+        if kind != "agent":
+            axis.annotate(
+                name.removeprefix("fixed ") + (" (best fixed)" if name == best else ""),
+                (knob_mean, iqm),
+                fontsize=7,
+                xytext=(4, -10 if kind == "random" else 3),
+                textcoords="offset points",
+            )
+    axis.set_xscale("log")
+    axis.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    axis.set_xticks([2, 3, 5, 10, 20, 30] if knob == "gate_threshold" else [2, 3, 4, 6, 10, 20])
+    if below:
+        axis.text(
+            0.01,
+            0.01,
+            "below the chart: " + ", ".join(name.removeprefix("fixed ") for name in below),
+            transform=axis.transAxes,
+            fontsize=7,
+        )
+    axis.set_xlabel(f"{knob_label} per step")
+    axis.set_ylabel("IQM episode return (95 % CI)")
+    axis.set_title(f"{args.env}, seeds 0-{args.seeds - 1}; red diamonds: the agents")
+    axis.grid(alpha=0.3)
+    figure.tight_layout()
+    path = args.out / "figures" / f"rl_{slug}.png"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    print(f"wrote {table} and {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
