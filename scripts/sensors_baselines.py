@@ -24,19 +24,16 @@ nothing on the evaluation seeds.
 
 ``--models``: folders written by ``scripts/train_rl.py`` (model.zip, config.json,
 vecnormalize.pkl); each agent is evaluated without training, and the agents together are
-one more row: the IQM over all their episodes (seeds x agents) with a bootstrap stratified
-by agent, as rliable does for several training runs.
-
-One environment configuration is one task, so rliable's stratified bootstrap reduces to a
-bootstrap over episodes (stratified by agent when several are pooled): the statistics are
-:mod:`agents.rl.evaluation`'s, shared with ``scripts/tuning_baselines.py``.
+one more row: the IQM over all their episodes (seeds x agents) with a bootstrap over seeds
+that resamples a seed's episodes together. The statistics are :mod:`agents.rl.evaluation`'s
+(where the difference to the rliable library is explained), shared with
+``scripts/tuning_baselines.py``.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import json
 import os
 import sys
 from pathlib import Path
@@ -51,6 +48,7 @@ import gymnasium as gym  # noqa: E402
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.evaluation import (  # noqa: E402
     agents_against,
+    check_agent_folders,
     policy_cells,
     run_policies,
 )
@@ -84,7 +82,13 @@ def training_table(args, env, env_kwargs: dict, version: str) -> int:
     seeds = list(range(1000, 1000 + args.training_seeds))
     names = list(policies)
     results = run_policies(
-        [policies[name] for name in names], args.env, env_kwargs, seeds, args.workers, RULES
+        [policies[name] for name in names],
+        args.env,
+        env_kwargs,
+        seeds,
+        args.workers,
+        RULES,
+        args.cache,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"training_returns_{version}.csv"
@@ -118,12 +122,29 @@ def main(argv=None) -> int:
         "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
     )
     parser.add_argument(
+        "--cache",
+        type=Path,
+        default=ROOT / "results" / "rl" / "sensors_baselines",
+        help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
+        "interrupted run) reuses them; keyed by version, policy, environment and seeds, so "
+        "clear it after changing code within a version (default: results/rl/sensors_baselines)",
+    )
+    parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
+    parser.add_argument(
         "--training-table",
         action="store_true",
         help="every policy on the training seeds only, to a CSV in --out; no evaluation",
     )
     args = parser.parse_args(argv)
     env_kwargs = {"scenario": args.scenario, "clutter_rate": args.clutter_rate}
+    if args.workers < 1:
+        parser.error(f"--workers must be >= 1; got {args.workers}")
+    try:
+        check_agent_folders(args.models, args.env, env_kwargs)
+    except ValueError as error:
+        parser.error(f"--models: {error}")
+    if args.no_cache:
+        args.cache = None
     env = gym.make(args.env, **env_kwargs)
     version = args.env.rsplit("-", 1)[1]
     if args.training_table:
@@ -133,7 +154,7 @@ def main(argv=None) -> int:
     # 1. the rules' settings on training seeds
     training = list(range(1000, 1000 + args.training_seeds))
     tuning = [(kind, setting) for kind, grid in HEURISTIC_GRIDS.items() for setting in grid]
-    results = run_policies(tuning, args.env, env_kwargs, training, args.workers, RULES)
+    results = run_policies(tuning, args.env, env_kwargs, training, args.workers, RULES, args.cache)
     best = {}
     for (kind, setting), rows in zip(tuning, results):
         score = float(np.mean([row["return"] for row in rows]))
@@ -151,13 +172,16 @@ def main(argv=None) -> int:
         policies[f"{kind} ({label})"] = (kind, setting)
         training_score[f"{kind} ({label})"] = score
     for folder in args.models:
-        config = json.loads((folder / "config.json").read_text())
-        if config["env"] != args.env or config["env_kwargs"] != env_kwargs:
-            parser.error(f"{folder} was trained on {config['env']} {config['env_kwargs']}")
         policies[f"agent {folder.name}"] = ("agent", folder)
     names = list(policies)
     results = run_policies(
-        [policies[name] for name in names], args.env, env_kwargs, evaluation, args.workers, RULES
+        [policies[name] for name in names],
+        args.env,
+        env_kwargs,
+        evaluation,
+        args.workers,
+        RULES,
+        args.cache,
     )
     by_name = dict(zip(names, results))
     agents = [name for name in names if policies[name][0] == "agent"]

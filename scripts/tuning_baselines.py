@@ -9,9 +9,9 @@ intervals.
    With the default ``trajectory=random layout=per_episode`` these are paths and sensor
    layouts that no training episode used.
 3. Writes docs/rl_window_v0.md or docs/rl_gating_v0.md: the interquartile mean (IQM) of the
-   episode return with a 95 % bootstrap interval (stratified by agent for the agents
-   together), mean return, NRMSE, the mean knob per step, the paired difference to the
-   best fixed setting seed by seed, and the agents' paired IQM and mean differences to the
+   episode return with a 95 % bootstrap interval over seeds (the agents' episodes on a seed
+   resampled together), mean return, NRMSE, the mean knob per step, the paired difference
+   to the best fixed setting seed by seed, and the agents' paired IQM and mean differences to the
    best fixed and the default setting; and docs/figures/rl_window_v0.png (or gating): the
    IQM return of every policy against its mean knob.
 
@@ -25,7 +25,6 @@ The statistics are :mod:`agents.rl.evaluation`'s (shared with ``scripts/sensors_
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -39,7 +38,13 @@ import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.cli import parse_kwargs  # noqa: E402
-from agents.rl.evaluation import agents_against, policy_cells, run_policies  # noqa: E402
+from agents.rl.evaluation import (  # noqa: E402
+    agents_against,
+    check_agent_folders,
+    iqm_interval,
+    policy_cells,
+    run_policies,
+)
 
 ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
 DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
@@ -69,23 +74,24 @@ def main(argv=None) -> int:
         type=Path,
         default=ROOT / "results" / "rl" / "tuning_baselines",
         help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
-        "interrupted run) reuses them (default: results/rl/tuning_baselines)",
+        "interrupted run) reuses them; keyed by version, policy, environment and seeds, so "
+        "clear it after changing code within a version (default: results/rl/tuning_baselines)",
     )
+    parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
     args = parser.parse_args(argv)
-    if args.seeds < 2 or args.training_seeds < 1:
-        parser.error("--seeds must be >= 2 and --training-seeds >= 1")
+    if args.no_cache:
+        args.cache = None
+    if args.seeds < 2 or args.training_seeds < 1 or args.workers < 1:
+        parser.error("--seeds must be >= 2, --training-seeds >= 1 and --workers >= 1")
     try:
         env_kwargs = parse_kwargs(args.env_kwargs)
         env = gym.make(args.env, **env_kwargs)
     except (TypeError, ValueError) as error:
         parser.error(f"--env-kwargs: {error}")
-    for folder in args.models:
-        config = json.loads((folder / "config.json").read_text())
-        if config["env"] != args.env or config["env_kwargs"] != env_kwargs:
-            parser.error(
-                f"{folder} was trained on {config['env']} {config['env_kwargs']}, "
-                f"not {args.env} {env_kwargs}"
-            )
+    try:
+        check_agent_folders(args.models, args.env, env_kwargs)
+    except ValueError as error:
+        parser.error(f"--models: {error}")
     constants, default = env.unwrapped.fixed_actions()
     knob = env.unwrapped.knob
     env.close()
@@ -180,8 +186,6 @@ def main(argv=None) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from agents.rl.evaluation import iqm_interval
 
     figure, axis = plt.subplots(figsize=(6.5, 4.2))
     points = {}

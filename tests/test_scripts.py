@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from agents.rl.evaluation import iqm_interval, paired_iqm_difference
 from agents.rl.heuristics import HEURISTIC_GRIDS
@@ -192,6 +193,8 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
         "1",
         "--out",
         str(tmp_path),
+        "--cache",
+        str(tmp_path / "cache"),
         "--models",
         model,
     )
@@ -233,6 +236,13 @@ def test_tuning_baselines_runs_on_a_few_seeds_and_refuses_other_tasks_agents(tmp
         assert f"| fixed C={window}" in table
     for row in ("| random |", "| agent window-ppo-seed0 |", "| **1 agents together** |"):
         assert row in table
+    training = dict(
+        re.match(r"training\s+(.+?)\s+mean return\s+(\S+)", line).groups()
+        for line in result.stdout.splitlines()
+        if line.startswith("training")
+    )
+    best = max(training, key=lambda name: float(training[name]))
+    assert len(training) == 9 and f"| {best} (best fixed, training seeds) |" in table
     assert table.count("(best fixed, training seeds)") == 1 and "(default)" in table
     assert "| setting | IQM return: agents - setting [95 % CI] |" in table
     assert (tmp_path / "figures" / "rl_window_v0.png").stat().st_size > 10_000
@@ -257,16 +267,20 @@ def test_the_paired_iqm_difference_pairs_the_seeds():
     assert noisy[1] < 5.0 < noisy[2] and noisy[2] - noisy[1] < 1.0
 
 
-def test_the_iqm_interval_is_stratified_by_agent():
-    """The IQM is the mean of the middle half (1..8: 4.5, by hand). Two agents, one always
-    returning 0 and one always 10: resampling within each agent keeps half of the pooled
-    episodes at 0 and half at 10, so every resample's IQM is 5 and the interval has zero
-    width; a bootstrap over the pooled episodes would draw unequal halves and spread."""
+def test_the_pooled_iqm_interval_resamples_seeds_not_episodes():
+    """The IQM is the mean of the middle half (1..8: 4.5, by hand). Agents whose returns go
+    together seed by seed are not independent draws: five agents with the same return on
+    every seed carry the information of one, so their pooled interval must be as wide as
+    one agent's (resampling each agent's episodes on its own would make it about sqrt(5) =
+    2.2 times narrower). Samples of different seeds are refused."""
     np.testing.assert_allclose(iqm_interval(np.arange(1.0, 9.0))[0], 4.5, rtol=0, atol=1e-12)
-    stratified = iqm_interval(np.zeros(40), np.full(40, 10.0))
-    np.testing.assert_allclose(stratified, (5.0, 5.0, 5.0), rtol=0, atol=1e-12)
-    pooled = iqm_interval(np.r_[np.zeros(40), np.full(40, 10.0)])
-    assert pooled[0] == 5.0 and pooled[2] - pooled[1] > 1.0
+    returns = np.random.default_rng(5).normal(size=100)
+    _, low, high = iqm_interval(returns)
+    iqm, pooled_low, pooled_high = iqm_interval(*[returns] * 5)
+    assert iqm == pytest.approx(stats.trim_mean(returns, 0.25), abs=1e-12)
+    assert 0.8 < (pooled_high - pooled_low) / (high - low) < 1.25
+    with pytest.raises(ValueError, match="same seeds"):
+        iqm_interval(returns, returns[:50])
 
 
 def test_model_study_pairs_runs_by_cell_and_seed():
@@ -316,6 +330,7 @@ def test_sensors_training_table_runs_every_policy_on_training_seeds_only(tmp_pat
         "1",
         "--out",
         str(tmp_path),
+        "--no-cache",
     )
     assert result.returncode == 0, result.stderr
     rows = list(csv.DictReader((tmp_path / "training_returns_v1.csv").open()))

@@ -7,12 +7,14 @@ episode per seed (``reset(seed=s)``), so every policy meets the same measurement
 
 The statistics of the evaluation protocol (``scripts/sensors_baselines.py``,
 ``scripts/tuning_baselines.py``): the interquartile mean (IQM) of the episode returns with a
-95 % percentile-bootstrap interval, stratified by agent when several trained agents are
-pooled (:func:`iqm_interval`), as the rliable library computes it for several training runs on
-one task; its paired difference between policies on shared seeds
-(:func:`paired_iqm_difference`); and the Student-t interval of a mean paired difference
-(:func:`paired_interval`). ``scipy.stats.bootstrap`` of the 25 %-trimmed mean gives these
-without another dependency.
+95 % percentile-bootstrap interval over seeds (the episodes of several trained agents pooled,
+a seed's episodes resampled together: :func:`iqm_interval`); its paired difference between
+policies on shared seeds (:func:`paired_iqm_difference`); and the Student-t interval of a
+mean paired difference (:func:`paired_interval`). ``scipy.stats.bootstrap`` of the
+25 %-trimmed mean gives these without another dependency. The rliable library's IQM is
+over training runs' scores, each a run's mean over its episodes, with runs resampled within
+each task; with five runs on one task that is an IQM of five numbers, so the episodes are
+pooled here instead, and each agent also has its own row.
 """
 
 from __future__ import annotations
@@ -40,7 +42,10 @@ __all__ = [
     "run_policy_episode",
     "evaluate_policy_on_seeds",
     "summarize_episodes",
+    "policy_cells",
+    "agents_against",
     "make_policy",
+    "check_agent_folders",
     "run_policies",
     "iqm_interval",
     "paired_iqm_difference",
@@ -168,6 +173,24 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
     return rules[kind](**setting)
 
 
+def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: dict) -> None:
+    """``ValueError`` naming the first folder that is not an agent saved by
+    :func:`agents.rl.training.train_agent` for ``env_id`` with exactly ``env_kwargs``."""
+    for folder in folders:
+        config_path = Path(folder) / "config.json"
+        if not config_path.is_file() or not (Path(folder) / "model.zip").is_file():
+            raise ValueError(
+                f"{folder} is not a trained agent's folder (it needs model.zip and config.json, "
+                "as scripts/train_rl.py writes them)"
+            )
+        config = json.loads(config_path.read_text())
+        if config.get("env") != env_id or config.get("env_kwargs") != env_kwargs:
+            raise ValueError(
+                f"{folder} was trained on {config.get('env')} {config.get('env_kwargs')}, "
+                f"not {env_id} {env_kwargs}"
+            )
+
+
 def _run_block(task) -> list[dict]:
     """Episodes of one policy on some seeds (a worker's unit): an agent is loaded once, a
     random policy or rule is made afresh for each seed (the random one seeded with it)."""
@@ -182,16 +205,24 @@ def _run_block(task) -> list[dict]:
     return rows
 
 
+AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
+"""What :func:`agents.rl.training.train_agent` saves of an agent (the last one only with
+``VecNormalize``), the files that key an agent's cached episodes."""
+
+
 def _cache_file(cache: Path, task) -> Path:
     """Where a task's rows are kept: named by a hash of the package version, the policy
-    (an agent by the bytes of its folder's files), the environment and the seeds."""
+    (an agent by the bytes of its saved files), the environment and the seeds. Code changes
+    within a version are not in the key: clear the folder after one."""
     import dgpt_gym
 
     kind, setting, env_id, env_kwargs, seeds, _ = task
     if kind == "agent":
         digest = hashlib.sha256()
-        for path in sorted(Path(setting).iterdir()):
-            digest.update(path.name.encode() + path.read_bytes())
+        for name in AGENT_FILES:
+            path = Path(setting) / name
+            if path.is_file():
+                digest.update(hashlib.sha256(path.read_bytes()).digest() + name.encode())
         setting = digest.hexdigest()
     elif isinstance(setting, np.ndarray):
         setting = setting.tolist()
@@ -234,6 +265,8 @@ def run_policies(
     later call with the same version, policy, environment and seeds, so an interrupted run
     loses no finished policy."""
     seeds = [int(seed) for seed in seeds]
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be a positive integer or None; got {workers!r}")
     if cache is not None:
         cache = Path(cache)
         cache.mkdir(parents=True, exist_ok=True)
@@ -249,15 +282,24 @@ def run_policies(
 
 def iqm_interval(*samples: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
     """Interquartile mean of the pooled ``samples`` and its 95 % percentile-bootstrap
-    interval (2000 resamples). With several samples (the episodes of several agents) each
-    is resampled on its own, the bootstrap stratified by sample that rliable uses."""
+    interval (2000 resamples). Several samples are the episodes of several trained agents
+    on the same seeds, in the same order: a resample draws seeds and takes every agent's
+    episode on each, because the agents' returns on a seed go together (a hard path is hard
+    for all of them), so their episodes are not independent draws. The interval is that of
+    these agents over seeds; it leaves out the variation between training runs, which the
+    agents' own rows show."""
 
     def pooled_iqm(*resampled, axis=-1):
         return stats.trim_mean(np.concatenate(resampled, axis=axis), 0.25, axis=axis)
 
+    if len({sample.shape for sample in samples}) > 1:
+        raise ValueError(
+            f"samples must be the same seeds' returns; got shapes {[x.shape for x in samples]}"
+        )
     result = stats.bootstrap(
         samples,
         pooled_iqm,
+        paired=len(samples) > 1,
         n_resamples=2000,
         method="percentile",
         rng=np.random.default_rng(seed),
@@ -311,7 +353,7 @@ def policy_cells(
 ) -> str:
     """Markdown cells of one policy (``names`` of one) or of several trained agents
     together (their episodes pooled): the IQM return with its 95 % bootstrap interval
-    (stratified by agent, :func:`iqm_interval`), the mean return, the NRMSE (%), the mean
+    over seeds (:func:`iqm_interval`), the mean return, the NRMSE (%), the mean
     knob per step, and the mean per-seed return minus ``reference``'s (the reference
     policy's returns on the same seeds) with its t interval ("-" for the reference itself,
     ``is_reference``). ``by_name`` maps a policy's name to its
@@ -341,21 +383,32 @@ def agents_against(
 ) -> list[str]:
     """Markdown table lines: the trained ``agents`` together against each of ``others``,
     paired by seed: the IQM of the agents' returns minus the other's with a 95 % bootstrap
-    interval over seeds (:func:`paired_iqm_difference`), and the differences of the mean
-    return and of the knob per step (``knob_label``) with 95 % t intervals; ``what`` names
-    the others in the header."""
+    interval over seeds (:func:`paired_iqm_difference`); the difference of the mean return
+    with two 95 % t intervals, over seeds (the agents' mean per seed: how sure the
+    comparison is for these agents) and, with two agents or more, over agents (each agent's
+    mean difference: how much it varies from one training run to another); and the
+    difference of the knob per step (``knob_label``) over seeds. ``what`` names the others
+    in the header."""
     returns = _per_seed(by_name, agents, "return")
+    over_agents = len(agents) > 1
     lines = [
-        f"| {what} | IQM return: agents - {what} [95 % CI] | mean return: agents - {what} | "
-        f"{knob_label}: agents - {what} |",
-        "|---|---|---|---|",
+        f"| {what} | IQM return: agents - {what} [95 % CI] | mean return: agents - {what}, "
+        "t over seeds | "
+        + (f"the same, t over the {len(agents)} agents | " if over_agents else "")
+        + f"{knob_label}: agents - {what} |",
+        "|---|---|---|---|" + ("---|" if over_agents else ""),
     ]
     for other in others:
-        iqm, low, high = paired_iqm_difference(returns, _per_seed(by_name, [other], "return")[0])
+        reference = _per_seed(by_name, [other], "return")[0]
+        iqm, low, high = paired_iqm_difference(returns, reference)
         cells = [f"{iqm:+.{digits}f} [{low:+.{digits}f}, {high:+.{digits}f}]"]
-        for key in ("return", "per_step"):
-            mine = _per_seed(by_name, agents, key).mean(axis=0)
-            difference, half = paired_interval(mine - _per_seed(by_name, [other], key)[0])
+        difference, half = paired_interval(returns.mean(axis=0) - reference)
+        cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
+        if over_agents:
+            difference, half = paired_interval((returns - reference).mean(axis=1))
             cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
+        knob = _per_seed(by_name, agents, "per_step").mean(axis=0)
+        difference, half = paired_interval(knob - _per_seed(by_name, [other], "per_step")[0])
+        cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
         lines.append(f"| {other} | {' | '.join(cells)} |")
     return lines

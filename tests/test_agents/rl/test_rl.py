@@ -1,6 +1,9 @@
 """The RL environments (agents/rl): checkers, determinism, reward accounting, sensor
 filtering, a short PPO run against a random policy, and saving and loading a model."""
 
+import json
+import shutil
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -268,10 +271,16 @@ def test_the_committed_tuning_agents_load_and_act(name, env_id):
     assert [folder.name for folder in folders] == [f"{name}-ppo-seed{s}" for s in range(5)]
     for folder in folders:
         assert sum(f.stat().st_size for f in folder.iterdir()) <= 1_000_000
+        config = json.loads((folder / "config.json").read_text())
+        assert config["env"] == env_id and config["timesteps"] == 40000
+        assert config["env_kwargs"] == {
+            "scenario": "S3",
+            "clutter_rate": 5,
+            "trajectory": "random",
+            "layout": "per_episode",
+        }
     model, config = load_agent(folders[0])
-    assert config["env"] == env_id and config["normalizer"] is not None
-    assert config["env_kwargs"]["trajectory"] == "random"
-    assert config["env_kwargs"]["layout"] == "per_episode"
+    assert config["normalizer"] is not None
     policy = ModelPolicy(model, config["normalizer"])
     env = gym.make(env_id, **config["env_kwargs"])
     observation, _ = env.reset(seed=0)
@@ -299,3 +308,33 @@ def test_run_policies_keeps_each_policys_episodes_and_reads_them_back(tmp_path, 
     assert again == rows
     with pytest.raises(AssertionError, match="ran an episode"):
         evaluation.run_policies([("constant", 1)], *arguments, [0, 2], 1, cache=tmp_path)
+
+
+def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
+    """An agent folder as train_rl.py leaves it (with its monitor/ folder) is cached by its
+    saved files: the same files read back the same rows, a changed model.zip is another
+    key; a folder without model.zip or trained elsewhere is refused by name."""
+    from pathlib import Path
+
+    from agents.rl import evaluation
+
+    source = Path(__file__).parents[3] / "models" / "window-ppo-seed0"
+    folder = tmp_path / "agent"
+    shutil.copytree(source, folder)
+    (folder / "monitor").mkdir()
+    (folder / "monitor" / "train.monitor.csv").write_text("#\n")
+    config = json.loads((folder / "config.json").read_text())
+    kwargs = {**config["env_kwargs"], "max_episode_steps": 3}
+    cache = tmp_path / "cache"
+    first = evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    again = evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    assert again == first and len(list(cache.glob("*.json"))) == 1
+    with (folder / "model.zip").open("ab") as handle:
+        handle.write(b"\0")  # still a valid zip: the archive's end is found from the back
+    evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    assert len(list(cache.glob("*.json"))) == 2
+    evaluation.check_agent_folders([folder], config["env"], config["env_kwargs"])
+    with pytest.raises(ValueError, match="was trained on"):
+        evaluation.check_agent_folders([folder], config["env"], {"scenario": "S1"})
+    with pytest.raises(ValueError, match="not a trained agent's folder"):
+        evaluation.check_agent_folders([tmp_path / "cache"], config["env"], {})
