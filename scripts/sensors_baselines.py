@@ -46,11 +46,10 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.cli import add_evaluation_arguments  # noqa: E402
 from agents.rl.evaluation import (  # noqa: E402
     agents_against,
-    check_agent_folders,
     policy_cells,
-    run_policies,
 )
 from agents.rl.heuristics import (  # noqa: E402
     HEURISTIC_GRIDS,
@@ -58,6 +57,7 @@ from agents.rl.heuristics import (  # noqa: E402
     UncertaintyRadiusPolicy,
 )
 from agents.rl.registration import ENVIRONMENTS  # noqa: E402
+from agents.rl.runs import check_agent_folders, run_policies  # noqa: E402
 
 ENV_IDS = tuple(
     environment.id
@@ -118,18 +118,7 @@ def main(argv=None) -> int:
     parser.add_argument("--clutter-rate", type=float, default=5.0)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=ROOT / "docs")
-    parser.add_argument(
-        "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
-    )
-    parser.add_argument(
-        "--cache",
-        type=Path,
-        default=ROOT / "results" / "rl" / "sensors_baselines",
-        help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
-        "interrupted run) reuses them; keyed by version, policy, environment and seeds, so "
-        "clear it after changing code within a version (default: results/rl/sensors_baselines)",
-    )
-    parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
+    add_evaluation_arguments(parser, ROOT / "results" / "rl" / "sensors_baselines")
     parser.add_argument(
         "--training-table",
         action="store_true",

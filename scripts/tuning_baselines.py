@@ -37,14 +37,13 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
-from agents.rl.cli import parse_kwargs  # noqa: E402
+from agents.rl.cli import add_evaluation_arguments, parse_kwargs  # noqa: E402
 from agents.rl.evaluation import (  # noqa: E402
     agents_against,
-    check_agent_folders,
     iqm_interval,
     policy_cells,
-    run_policies,
 )
+from agents.rl.runs import check_agent_folders, run_policies  # noqa: E402
 
 ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
 DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
@@ -66,18 +65,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=ROOT / "docs")
-    parser.add_argument(
-        "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
-    )
-    parser.add_argument(
-        "--cache",
-        type=Path,
-        default=ROOT / "results" / "rl" / "tuning_baselines",
-        help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
-        "interrupted run) reuses them; keyed by version, policy, environment and seeds, so "
-        "clear it after changing code within a version (default: results/rl/tuning_baselines)",
-    )
-    parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
+    add_evaluation_arguments(parser, ROOT / "results" / "rl" / "tuning_baselines")
     args = parser.parse_args(argv)
     if args.no_cache:
         args.cache = None

@@ -33,6 +33,25 @@ ENV_ALIASES = {environment.alias: environment.id for environment in ENVIRONMENTS
 PER_STEP = {environment.id: environment.per_step for environment in ENVIRONMENTS}
 
 
+def add_evaluation_arguments(parser: argparse.ArgumentParser, cache: Path) -> None:
+    """The arguments the evaluation scripts share (``scripts/sensors_baselines.py``,
+    ``scripts/tuning_baselines.py``): ``--models`` (trained agents' folders) and ``--cache``
+    / ``--no-cache`` (:func:`agents.rl.evaluation.run_policies`' folder of finished
+    policies, ``cache`` by default)."""
+    parser.add_argument(
+        "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"
+    )
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=cache,
+        help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
+        "interrupted run) reuses them; keyed by version, policy, environment and seeds, so "
+        f"clear it after changing code within a version (default: {cache})",
+    )
+    parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
+
+
 def parse_kwargs(items: list[str]) -> dict:
     """``["scenario=S3", "clutter_rate=5"]`` -> ``{"scenario": "S3", "clutter_rate": 5}``
     (values are Python literals where they parse as one, else strings)."""

@@ -2,8 +2,9 @@
 
 A policy is anything with ``predict(observation) -> action``; trained Stable-Baselines3
 models are wrapped by :class:`ModelPolicy`. :func:`evaluate_policy_on_seeds` runs one
-episode per seed (``reset(seed=s)``), so every policy meets the same measurements;
-:func:`run_policies` does that for several policies in worker processes.
+episode per seed (``reset(seed=s)``), so every policy meets the same measurements
+(:mod:`agents.rl.runs` does that for several policies, trained agents included, in worker
+processes).
 
 The statistics of the evaluation protocol (``scripts/sensors_baselines.py``,
 ``scripts/tuning_baselines.py``): the interquartile mean (IQM) of the episode returns with a
@@ -19,12 +20,7 @@ pooled here instead, and each agent also has its own row.
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 from collections.abc import Iterable
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -44,9 +40,6 @@ __all__ = [
     "summarize_episodes",
     "policy_cells",
     "agents_against",
-    "make_policy",
-    "check_agent_folders",
-    "run_policies",
     "iqm_interval",
     "paired_iqm_difference",
     "paired_interval",
@@ -151,133 +144,6 @@ def summarize_episodes(episodes: list[dict], confidence: float = 0.95) -> dict[s
         else:
             summary[f"{key}_ci"] = float("nan")
     return summary
-
-
-def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None = None):
-    """A policy from a picklable description: ``kind`` ``"agent"`` (``setting`` the folder
-    :func:`agents.rl.training.train_agent` wrote), ``"constant"`` (``setting`` the action),
-    ``"random"`` (seeded with ``seed``), or a key of ``rules`` (a policy class called with
-    the ``setting`` dict as keyword arguments)."""
-    if kind == "agent":
-        from agents.rl.training import load_agent
-
-        model, config = load_agent(setting)
-        return ModelPolicy(model, config["normalizer"])
-    if kind == "constant":
-        return ConstantPolicy(setting)
-    if kind == "random":
-        return RandomPolicy(env.action_space, seed=seed)
-    if rules is None or kind not in rules:
-        allowed = ["agent", "constant", "random", *(rules or {})]
-        raise ValueError(f"kind must be one of {allowed}; got {kind!r}")
-    return rules[kind](**setting)
-
-
-def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: dict) -> None:
-    """``ValueError`` naming the first folder that is not an agent saved by
-    :func:`agents.rl.training.train_agent` for ``env_id`` with exactly ``env_kwargs``."""
-    for folder in folders:
-        config_path = Path(folder) / "config.json"
-        if not config_path.is_file() or not (Path(folder) / "model.zip").is_file():
-            raise ValueError(
-                f"{folder} is not a trained agent's folder (it needs model.zip and config.json, "
-                "as scripts/train_rl.py writes them)"
-            )
-        config = json.loads(config_path.read_text())
-        if config.get("env") != env_id or config.get("env_kwargs") != env_kwargs:
-            raise ValueError(
-                f"{folder} was trained on {config.get('env')} {config.get('env_kwargs')}, "
-                f"not {env_id} {env_kwargs}"
-            )
-
-
-def _run_block(task) -> list[dict]:
-    """Episodes of one policy on some seeds (a worker's unit): an agent is loaded once, a
-    random policy or rule is made afresh for each seed (the random one seeded with it)."""
-    kind, setting, env_id, env_kwargs, seeds, rules = task
-    env = gym.make(env_id, **env_kwargs)
-    agent = make_policy(kind, setting, env, seeds[0]) if kind == "agent" else None
-    rows = []
-    for seed in seeds:
-        policy = agent or make_policy(kind, setting, env, seed, rules)
-        rows.append(run_policy_episode(env, policy, seed))
-    env.close()
-    return rows
-
-
-AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
-"""What :func:`agents.rl.training.train_agent` saves of an agent (the last one only with
-``VecNormalize``), the files that key an agent's cached episodes."""
-
-
-def _cache_file(cache: Path, task) -> Path:
-    """Where a task's rows are kept: named by a hash of the package version, the policy
-    (an agent by the bytes of its saved files), the environment and the seeds. Code changes
-    within a version are not in the key: clear the folder after one."""
-    import dgpt_gym
-
-    kind, setting, env_id, env_kwargs, seeds, _ = task
-    if kind == "agent":
-        digest = hashlib.sha256()
-        for name in AGENT_FILES:
-            path = Path(setting) / name
-            if path.is_file():
-                digest.update(hashlib.sha256(path.read_bytes()).digest() + name.encode())
-        setting = digest.hexdigest()
-    elif isinstance(setting, np.ndarray):
-        setting = setting.tolist()
-    key = json.dumps(
-        [dgpt_gym.__version__, kind, setting, env_id, env_kwargs, seeds],
-        sort_keys=True,
-        default=str,
-    )
-    return cache / f"{kind}-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
-
-
-def _run_cached(task_and_cache) -> list[dict]:
-    """:func:`_run_block`, its rows read from or written to the cache folder if one is given."""
-    task, cache = task_and_cache
-    if cache is None:
-        return _run_block(task)
-    path = _cache_file(cache, task)
-    if path.exists():
-        return json.loads(path.read_text())
-    rows = _run_block(task)
-    temporary = path.with_suffix(".tmp")
-    temporary.write_text(json.dumps(rows))
-    temporary.replace(path)  # a run interrupted while writing leaves no half file
-    return rows
-
-
-def run_policies(
-    policies: list[tuple[str, object]],
-    env_id: str,
-    env_kwargs: dict,
-    seeds: Iterable[int],
-    workers: int | None = None,
-    rules: dict | None = None,
-    cache: str | Path | None = None,
-) -> list[list[dict]]:
-    """:func:`run_policy_episode` rows of every policy (``(kind, setting)`` as
-    :func:`make_policy` takes them) on every seed, one list per policy in order; a process
-    pool of ``workers`` (default: the CPU count; 1 runs here) takes one policy each. With a
-    ``cache`` folder each policy's rows are kept there as they finish and read back by a
-    later call with the same version, policy, environment and seeds, so an interrupted run
-    loses no finished policy."""
-    seeds = [int(seed) for seed in seeds]
-    if workers is not None and workers < 1:
-        raise ValueError(f"workers must be a positive integer or None; got {workers!r}")
-    if cache is not None:
-        cache = Path(cache)
-        cache.mkdir(parents=True, exist_ok=True)
-    tasks = [
-        ((kind, setting, env_id, env_kwargs, seeds, rules), cache) for kind, setting in policies
-    ]
-    workers = workers or os.cpu_count() or 1
-    if workers == 1:
-        return [_run_cached(task) for task in tasks]
-    with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(_run_cached, tasks))
 
 
 def iqm_interval(*samples: np.ndarray, seed: int = 0) -> tuple[float, float, float]:

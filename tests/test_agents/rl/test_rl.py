@@ -294,20 +294,20 @@ def test_run_policies_keeps_each_policys_episodes_and_reads_them_back(tmp_path, 
     """With a cache folder, a policy's rows are written once and a second call with the same
     policy, environment and seeds reads them back without running an episode; other seeds
     are another key and run."""
-    from agents.rl import evaluation
+    from agents.rl import runs
 
     arguments = ("DGPTrackWindow-v0", {"scenario": "S3", "max_episode_steps": 5})
-    rows = evaluation.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
+    rows = runs.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
     assert len(list(tmp_path.glob("*.json"))) == 1 and len(rows[0]) == 2
 
     def no_episodes(task):
         raise AssertionError("ran an episode")
 
-    monkeypatch.setattr(evaluation, "_run_block", no_episodes)
-    again = evaluation.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
+    monkeypatch.setattr(runs, "_run_block", no_episodes)
+    again = runs.run_policies([("constant", 1)], *arguments, [0, 1], 1, cache=tmp_path)
     assert again == rows
     with pytest.raises(AssertionError, match="ran an episode"):
-        evaluation.run_policies([("constant", 1)], *arguments, [0, 2], 1, cache=tmp_path)
+        runs.run_policies([("constant", 1)], *arguments, [0, 2], 1, cache=tmp_path)
 
 
 def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
@@ -316,7 +316,7 @@ def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
     key; a folder without model.zip or trained elsewhere is refused by name."""
     from pathlib import Path
 
-    from agents.rl import evaluation
+    from agents.rl import runs
 
     source = Path(__file__).parents[3] / "models" / "window-ppo-seed0"
     folder = tmp_path / "agent"
@@ -326,15 +326,15 @@ def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
     config = json.loads((folder / "config.json").read_text())
     kwargs = {**config["env_kwargs"], "max_episode_steps": 3}
     cache = tmp_path / "cache"
-    first = evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
-    again = evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    first = runs.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    again = runs.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
     assert again == first and len(list(cache.glob("*.json"))) == 1
     with (folder / "model.zip").open("ab") as handle:
         handle.write(b"\0")  # still a valid zip: the archive's end is found from the back
-    evaluation.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
+    runs.run_policies([("agent", folder)], config["env"], kwargs, [0], 1, cache=cache)
     assert len(list(cache.glob("*.json"))) == 2
-    evaluation.check_agent_folders([folder], config["env"], config["env_kwargs"])
+    runs.check_agent_folders([folder], config["env"], config["env_kwargs"])
     with pytest.raises(ValueError, match="was trained on"):
-        evaluation.check_agent_folders([folder], config["env"], {"scenario": "S1"})
+        runs.check_agent_folders([folder], config["env"], {"scenario": "S1"})
     with pytest.raises(ValueError, match="not a trained agent's folder"):
-        evaluation.check_agent_folders([tmp_path / "cache"], config["env"], {})
+        runs.check_agent_folders([tmp_path / "cache"], config["env"], {})
