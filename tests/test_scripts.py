@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from agents.rl.evaluation import iqm_interval, paired_iqm_difference
+from agents.rl.evaluation import (
+    agents_against,
+    iqm_interval,
+    paired_iqm_difference,
+    policy_cells,
+)
 from agents.rl.heuristics import HEURISTIC_GRIDS
 from dgpt_gym.benchmark.cli import with_inputs
 
@@ -265,6 +270,31 @@ def test_the_paired_iqm_difference_pairs_the_seeds():
     np.testing.assert_allclose(exact, (5.0, 5.0, 5.0), rtol=0, atol=1e-9)
     noisy = paired_iqm_difference(np.stack([rule + 5.0 + rng.normal(size=100)] * 5), rule)
     assert noisy[1] < 5.0 < noisy[2] and noisy[2] - noisy[1] < 1.0
+
+
+def test_the_table_cells_pair_by_seed_and_by_agent():
+    """Hand-computed cells. Agent a returns the reference's return + 1 on every seed and
+    agent b + 3: per seed the agents' mean is 2 above it, exactly (t over seeds: +2.0 +-
+    0.0); over the two agents the differences are 1 and 3, mean 2, standard error 1,
+    t(0.975, 1 dof) = 12.706 (+2.0 +- 12.7). Knobs 4 and 6 against 3: +2.0 +- 0.0. Against
+    itself the reference's paired cell is "-". The pooled IQM of a and b (the middle four of
+    eight values, 5.75) minus the reference's (3.75) is 2 too; its bootstrap interval is not
+    exact, because a resample's trimming mixes the two agents."""
+    reference = [10.0, -4.0, 7.0, 0.5]
+
+    def rows(offset, knob):
+        return [
+            {"return": r + offset, "nrmse": 0.01, "per_step": knob, "seed": seed}
+            for seed, r in enumerate(reference)
+        ]
+
+    by_name = {"a": rows(1.0, 4.0), "b": rows(3.0, 6.0), "ref": rows(0.0, 3.0)}
+    cells = agents_against(by_name, ["a", "b"], ["ref"], "knob")[-1].split(" | ")
+    assert cells[0] == "| ref" and cells[1].startswith("+2.0 [")  # IQMs 5.75 and 3.75
+    assert cells[2:] == ["+2.0 +- 0.0", "+2.0 +- 12.7", "+2.0 +- 0.0 |"]
+    cells = policy_cells(by_name, ["a", "b"], np.array(reference), digits=2, knob_digits=2)
+    assert cells.endswith("| 1.00 | 5.00 | +2.00 +- 0.00")
+    assert policy_cells(by_name, ["ref"], np.array(reference), is_reference=True).endswith("| -")
 
 
 def test_the_pooled_iqm_interval_resamples_seeds_not_episodes():

@@ -36,7 +36,7 @@ PER_STEP = {environment.id: environment.per_step for environment in ENVIRONMENTS
 def add_evaluation_arguments(parser: argparse.ArgumentParser, cache: Path) -> None:
     """The arguments the evaluation scripts share (``scripts/sensors_baselines.py``,
     ``scripts/tuning_baselines.py``): ``--models`` (trained agents' folders) and ``--cache``
-    / ``--no-cache`` (:func:`agents.rl.evaluation.run_policies`' folder of finished
+    / ``--no-cache`` (:func:`agents.rl.runs.run_policies`' folder of finished
     policies, ``cache`` by default)."""
     parser.add_argument(
         "--models", nargs="*", type=Path, default=[], help="trained agents' folders (train_rl.py)"

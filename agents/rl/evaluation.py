@@ -138,11 +138,9 @@ def summarize_episodes(episodes: list[dict], confidence: float = 0.95) -> dict[s
     for key in ("return", "nrmse", "per_step"):
         values = np.array([episode[key] for episode in episodes], dtype=float)
         summary[key] = float(values.mean())
-        if values.size > 1:
-            sem = values.std(ddof=1) / np.sqrt(values.size)
-            summary[f"{key}_ci"] = float(sem * stats.t.ppf(0.5 + confidence / 2, values.size - 1))
-        else:
-            summary[f"{key}_ci"] = float("nan")
+        summary[f"{key}_ci"] = (
+            paired_interval(values, confidence)[1] if values.size > 1 else float("nan")
+        )
     return summary
 
 
@@ -198,10 +196,12 @@ def paired_iqm_difference(agents: np.ndarray, reference: np.ndarray, seed: int =
     return float(difference(*agents, reference)), float(interval.low), float(interval.high)
 
 
-def paired_interval(differences: np.ndarray) -> tuple[float, float]:
-    """Mean of paired differences and the half-width of its Student-t 95 % interval."""
+def paired_interval(differences: np.ndarray, confidence: float = 0.95) -> tuple[float, float]:
+    """Mean of paired differences (or of any sample) and the half-width of its Student-t
+    interval at ``confidence``."""
     sem = differences.std(ddof=1) / np.sqrt(differences.size)
-    return float(differences.mean()), float(sem * stats.t.ppf(0.975, differences.size - 1))
+    half = sem * stats.t.ppf(0.5 + confidence / 2, differences.size - 1)
+    return float(differences.mean()), float(half)
 
 
 def _per_seed(by_name: dict, names: list[str], key: str) -> np.ndarray:
@@ -256,6 +256,7 @@ def agents_against(
     difference of the knob per step (``knob_label``) over seeds. ``what`` names the others
     in the header."""
     returns = _per_seed(by_name, agents, "return")
+    knob = _per_seed(by_name, agents, "per_step").mean(axis=0)
     over_agents = len(agents) > 1
     lines = [
         f"| {what} | IQM return: agents - {what} [95 % CI] | mean return: agents - {what}, "
@@ -273,7 +274,6 @@ def agents_against(
         if over_agents:
             difference, half = paired_interval((returns - reference).mean(axis=1))
             cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
-        knob = _per_seed(by_name, agents, "per_step").mean(axis=0)
         difference, half = paired_interval(knob - _per_seed(by_name, [other], "per_step")[0])
         cells.append(f"{difference:+.{digits}f} +- {half:.{digits}f}")
         lines.append(f"| {other} | {' | '.join(cells)} |")
