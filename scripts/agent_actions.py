@@ -11,8 +11,13 @@ observation says:
   surprise (the gated summaries lie more than 10 m, a fifth of the sensing range, from
   their predictions on average); otherwise 1-2 experts or 3 and more.
 
+With ``--clairvoyant SETTING`` a second table does the same for the greedy clairvoyant
+policy of :mod:`agents.rl.clairvoyant` (it tries every fixed setting each step and keeps
+the one that scores best, ``SETTING`` where several tie): what adapting with hindsight of
+each step's error would choose.
+
     python scripts/agent_actions.py models/sensors-v1-ppo-seed*
-    python scripts/agent_actions.py models/window-ppo-seed*
+    python scripts/agent_actions.py --clairvoyant "fixed C=3" models/window-ppo-seed*
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
 from agents.rl.evaluation import ModelPolicy  # noqa: E402
 from agents.rl.features import FEATURE_NAMES  # noqa: E402
 from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, DGPTrackSensorsV1Env  # noqa: E402
@@ -68,36 +74,24 @@ def tuning_situation(observation: np.ndarray) -> str:
     return TUNING_SITUATIONS[0] if experts <= 2 else TUNING_SITUATIONS[1]
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("models", nargs="+", type=Path)
-    parser.add_argument("--seeds", type=int, default=20, help="evaluation seeds 0..N-1")
-    args = parser.parse_args(argv)
-    counts = collections.defaultdict(collections.Counter)
-    env_ids = set()
-    for folder in args.models:
-        model, config = load_agent(folder)
-        env_ids.add(config["env"])
-        policy = ModelPolicy(model, config["normalizer"])
-        env = gym.make(config["env"], **config["env_kwargs"])
-        situations = (
-            SENSOR_SITUATIONS
-            if isinstance(env.unwrapped, DGPTrackSensorsV1Env)
-            else TUNING_SITUATIONS
-        )
-        classify = sensor_situation if situations is SENSOR_SITUATIONS else tuning_situation
-        for seed in range(args.seeds):
-            observation, _ = env.reset(seed=seed)
-            done = False
-            while not done:
-                name = classify(observation)
-                observation, _, terminated, truncated, info = env.step(policy.predict(observation))
-                counts[name][round(float(info[env.unwrapped.knob]), 1)] += 1
-                done = terminated or truncated
-    if len(env_ids) != 1:
-        parser.error(f"the agents must share one environment; got {sorted(env_ids)}")
-    knob = gym.make(env_ids.pop()).unwrapped.knob
-    print(f"{len(args.models)} agent(s), seeds 0-{args.seeds - 1}: {knob} per step, by situation\n")
+def tally(env: gym.Env, policy, seeds: range, counts: dict) -> tuple[str, ...]:
+    """Add to ``counts`` (situation -> Counter of knob values) what ``policy`` sets on every
+    step of ``seeds``; returns the environment's situations in table order."""
+    sensors = isinstance(env.unwrapped, DGPTrackSensorsV1Env)
+    classify = sensor_situation if sensors else tuning_situation
+    for seed in seeds:
+        observation, _ = env.reset(seed=seed)
+        done = False
+        while not done:
+            name = classify(observation)
+            observation, _, terminated, truncated, info = env.step(policy.predict(observation))
+            counts[name][round(float(info[env.unwrapped.knob]), 1)] += 1
+            done = terminated or truncated
+    return SENSOR_SITUATIONS if sensors else TUNING_SITUATIONS
+
+
+def print_table(title: str, knob: str, situations: tuple[str, ...], counts: dict) -> None:
+    print(f"{title}: {knob} per step, by situation\n")
     print(f"| situation | steps | mean {knob} | most frequent values (share) |")
     print("|---|---|---|---|")
     for name in situations:
@@ -109,6 +103,47 @@ def main(argv=None) -> int:
             f"{value:g}: {100 * n / total:.0f} %" for value, n in counts[name].most_common(4)
         )
         print(f"| {name} | {total} | {mean:.2f} | {shares} |")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="+", type=Path)
+    parser.add_argument("--seeds", type=int, default=20, help="evaluation seeds 0..N-1")
+    parser.add_argument(
+        "--clairvoyant",
+        metavar="SETTING",
+        help="also tabulate the greedy clairvoyant policy in the agents' environment, keeping "
+        "this fixed setting (a name of the environment's fixed_actions(), e.g. 'fixed C=3') "
+        "where several tie",
+    )
+    args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error(f"--seeds must be >= 1; got {args.seeds}")
+    seeds = range(args.seeds)
+    counts = collections.defaultdict(collections.Counter)
+    configs = {}
+    for folder in args.models:
+        model, config = load_agent(folder)
+        configs[(config["env"], repr(sorted(config["env_kwargs"].items())))] = config
+        env = gym.make(config["env"], **config["env_kwargs"])
+        situations = tally(env, ModelPolicy(model, config["normalizer"]), seeds, counts)
+    if len(configs) != 1:
+        parser.error(f"the agents must share one environment; got {sorted(configs)}")
+    config = next(iter(configs.values()))
+    env = gym.make(config["env"], **config["env_kwargs"])
+    knob = env.unwrapped.knob
+    print_table(f"{len(args.models)} agent(s), seeds 0-{args.seeds - 1}", knob, situations, counts)
+    if args.clairvoyant:
+        settings, _ = env.unwrapped.fixed_actions()
+        if args.clairvoyant not in settings:
+            parser.error(f"--clairvoyant must be one of {list(settings)}; got {args.clairvoyant!r}")
+        policy = GreedyClairvoyantPolicy(env, prefer=settings[args.clairvoyant])
+        counts = collections.defaultdict(collections.Counter)
+        tally(env, policy, seeds, counts)
+        print()
+        print_table(
+            f"the greedy clairvoyant policy, seeds 0-{args.seeds - 1}", knob, situations, counts
+        )
     return 0
 
 

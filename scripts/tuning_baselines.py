@@ -9,6 +9,11 @@ intervals.
    (``--first-seed 1000``: on the training seeds, to choose between agents).
    With the default ``trajectory=random layout=per_episode`` these are paths and sensor
    layouts that no training episode used.
+   With ``--clairvoyant``, two references that see the truth and that no agent could run
+   (:mod:`agents.rl.clairvoyant`): the greedy clairvoyant policy, which tries every fixed
+   setting at each step and keeps the best (the best fixed setting where several tie), and
+   the best fixed setting of each episode with hindsight. They show what adapting the knob
+   could gain.
 3. Writes docs/rl_window_v0.md or docs/rl_gating_v0.md: the interquartile mean (IQM) of the
    episode return with a 95 % bootstrap interval over seeds (the agents' episodes on a seed
    resampled together), mean return, NRMSE, the mean knob per step, the paired difference
@@ -16,8 +21,8 @@ intervals.
    best fixed and the default setting; and docs/figures/rl_window_v0.png (or gating): the
    IQM return of every policy against its mean knob.
 
-    python scripts/tuning_baselines.py --env DGPTrackWindow-v0 --models models/window-ppo-seed*
-    python scripts/tuning_baselines.py --env DGPTrackGating-v0 --models models/gating-ppo-seed*
+    python scripts/tuning_baselines.py --env DGPTrackWindow-v0 --clairvoyant --models models/window-ppo-seed*
+    python scripts/tuning_baselines.py --env DGPTrackGating-v0 --clairvoyant --models models/gating-ppo-seed*
     python scripts/tuning_baselines.py --env DGPTrackWindow-v0 --seeds 20 --training-seeds 5
 
 The statistics are :mod:`agents.rl.evaluation`'s (shared with ``scripts/sensors_baselines.py``).
@@ -38,6 +43,7 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.clairvoyant import hindsight_best_per_seed  # noqa: E402
 from agents.rl.cli import add_evaluation_arguments, parse_kwargs  # noqa: E402
 from agents.rl.evaluation import (  # noqa: E402
     agents_against,
@@ -50,6 +56,8 @@ ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
 DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
 """The documented task: S3 at clutter rate 5, a random path in a layout drawn from the seed."""
 KNOB_LABELS = {"window": "mean window C", "gate_threshold": "mean gate threshold"}
+CLAIRVOYANT = "clairvoyant, greedy per step (sees the truth)"
+HINDSIGHT = "clairvoyant, best fixed per episode (hindsight)"
 
 
 def main(argv=None) -> int:
@@ -70,6 +78,12 @@ def main(argv=None) -> int:
         default=DEFAULT_ENV_KWARGS,
         metavar="KEY=VALUE",
         help=f"environment arguments (default: {' '.join(DEFAULT_ENV_KWARGS)})",
+    )
+    parser.add_argument(
+        "--clairvoyant",
+        action="store_true",
+        help="add the clairvoyant references (agents.rl.clairvoyant); the greedy one steps "
+        "the environment once per action per step, about as long as all fixed settings",
     )
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=ROOT / "docs")
@@ -113,6 +127,8 @@ def main(argv=None) -> int:
     # 2. every policy on the evaluation seeds
     policies = {name: ("constant", action) for name, action in constants.items()}
     policies["random"] = ("random", None)
+    if args.clairvoyant:
+        policies[CLAIRVOYANT] = ("clairvoyant", constants[best])
     for folder in args.models:
         policies[f"agent {folder.name}"] = ("agent", folder)
     names = list(policies)
@@ -125,6 +141,10 @@ def main(argv=None) -> int:
         cache=args.cache,
     )
     by_name = dict(zip(names, results))
+    if args.clairvoyant:
+        by_name[HINDSIGHT] = hindsight_best_per_seed({name: by_name[name] for name in constants})
+        policies[HINDSIGHT] = ("hindsight", None)
+        names.insert(names.index(CLAIRVOYANT) + 1, HINDSIGHT)
     agents = [name for name in names if policies[name][0] == "agent"]
 
     # 3. the tables and the figure
@@ -132,6 +152,7 @@ def main(argv=None) -> int:
     command = (
         f"python scripts/tuning_baselines.py --env {args.env}"
         + (f" --first-seed {args.first_seed}" if args.first_seed else "")
+        + (" --clairvoyant" if args.clairvoyant else "")
         + (f" --seeds {args.seeds}" if args.seeds != 100 else "")
         + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
         + (
@@ -165,6 +186,19 @@ def main(argv=None) -> int:
         role = " (best fixed, training seeds)" if name == best else ""
         role += " (default)" if name == default else ""
         lines.append(f"| {name}{role} | {cells} |")
+    if args.clairvoyant:
+        lines += [
+            "",
+            "The two clairvoyant rows see the true position, so no agent can run them "
+            "(`agents.rl.clairvoyant`): the greedy one tries every fixed setting at each "
+            "step on copies of the environment (the same measurements and random draws) and "
+            "keeps the one whose step scores best, the best fixed setting where several tie; "
+            "the other takes, seed by seed, the fixed setting "
+            "with the best episode return. Their paired difference to the best fixed "
+            "setting shows what adapting the knob could gain: overstated by the luck that "
+            "choosing with hindsight picks up, and, for the greedy one, understated by "
+            "choices whose gain comes in later steps.",
+        ]
     if agents:
         others = [best] if default == best else [best, default]
         lines += [
@@ -204,15 +238,17 @@ def main(argv=None) -> int:
         "constant": dict(fmt="o", color="0.45"),
         "random": dict(fmt="x", color="k"),
         "agent": dict(fmt="D", color="C3"),
+        "clairvoyant": dict(fmt="*", color="C0", ms=9),
+        "hindsight": dict(fmt="s", color="C0"),
     }
     for name, (knob_mean, iqm, low, high) in points.items():
         if name in below:
             continue
         kind = policies[name][0]
         axis.errorbar(
-            knob_mean, iqm, yerr=[[iqm - low], [high - iqm]], ms=5, capsize=2, **style[kind]
+            knob_mean, iqm, yerr=[[iqm - low], [high - iqm]], capsize=2, **{"ms": 5, **style[kind]}
         )
-        if kind != "agent":
+        if kind not in ("agent", "clairvoyant", "hindsight"):
             axis.annotate(
                 name.removeprefix("fixed ") + (" (best fixed)" if name == best else ""),
                 (knob_mean, iqm),
@@ -234,7 +270,10 @@ def main(argv=None) -> int:
         )
     axis.set_xlabel(f"{knob_label} per step")
     axis.set_ylabel("IQM episode return (95 % CI)")
-    axis.set_title(f"{args.env}, seeds {seed_range}; red diamonds: the agents")
+    title = f"{args.env}, seeds {seed_range}; red diamonds: the agents"
+    if args.clairvoyant:
+        title += ";\nblue: clairvoyant (star greedy per step, square best fixed per episode)"
+    axis.set_title(title, fontsize=9)
     axis.grid(alpha=0.3)
     figure.tight_layout()
     path = args.out / "figures" / f"rl_{slug}.png"

@@ -220,25 +220,44 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "| after a silent step |" in result.stdout and "| sigma < 10 m |" in result.stdout
     result = run_script(
-        "agent_actions.py", str(ROOT / "models" / "window-ppo-seed0"), "--seeds", "1"
+        "agent_actions.py",
+        str(ROOT / "models" / "window-ppo-seed0"),
+        "--seeds",
+        "1",
+        "--clairvoyant",
+        "fixed C=3",
     )
     assert result.returncode == 0, result.stderr
-    assert "mean window" in result.stdout and "| 3+ experts |" in result.stdout
+    agent, clairvoyant = result.stdout.split("the greedy clairvoyant policy, seeds 0-0")
+    for table in (agent, clairvoyant):
+        assert "mean window" in table and "| 3+ experts |" in table
 
 
 def test_tuning_baselines_runs_on_a_few_seeds_and_refuses_other_tasks_agents(tmp_path):
     """The script behind docs/rl_window_v0.md on 2 evaluation seeds (the documented run uses
-    100): every fixed window, the random policy, the agent and the agents together have a
-    row, the best fixed setting is marked, the paired table compares the agents with it,
-    and the figure is written. An agent trained on another task is refused, naming it."""
+    100): every fixed window, the random policy, the clairvoyant references, the agent and
+    the agents together have a row, the best fixed setting is marked, the paired table
+    compares the agents with it, and the figure is written. The best fixed window per
+    episode with hindsight has, on every seed, the best fixed window's return, so its mean
+    is the highest of the fixed rows'. An agent trained on another task is refused, naming
+    it."""
     model = str(ROOT / "models" / "window-ppo-seed0")
     common = ["--seeds", "2", "--training-seeds", "1", "--workers", "1", "--out", str(tmp_path)]
     common += ["--cache", str(tmp_path / "cache")]
-    result = run_script("tuning_baselines.py", *common, "--models", model)
+    result = run_script("tuning_baselines.py", *common, "--clairvoyant", "--models", model)
     assert result.returncode == 0, result.stderr
     table = (tmp_path / "rl_window_v0.md").read_text()
+    mean_return = {
+        cells[0].strip(): float(cells[2])
+        for cells in (line.split("|")[1:] for line in table.splitlines())
+        if len(cells) == 7 and cells[0].strip().startswith(("fixed", "clairvoyant"))
+    }
     for window in (2, 3, 4, 5, 6, 8, 10, 14, 20):
-        assert f"| fixed C={window}" in table
+        assert any(name.startswith(f"fixed C={window}") for name in mean_return)
+    hindsight = mean_return.pop("clairvoyant, best fixed per episode (hindsight)")
+    greedy = mean_return.pop("clairvoyant, greedy per step (sees the truth)")
+    assert hindsight >= max(mean_return.values())
+    assert np.isfinite(greedy)
     for row in ("| random |", "| agent window-ppo-seed0 |", "| **1 agents together** |"):
         assert row in table
     training = dict(
@@ -454,3 +473,40 @@ def test_calibration_misses_tallies_by_hand():
     assert table["2+ target points"] == [2, 0.0, 8.25, 8.25]
     assert table["turning"] == [2, 1 / 4, 11.125, 11.125]
     assert table["1 step since a gap"][0] == 0 and np.isnan(table["1 step since a gap"][1])
+
+
+def test_clairvoyant_imitation_records_advantages_and_acts_on_them(tmp_path):
+    """scripts/clairvoyant_imitation.py on a few seeds: each step's record holds every fixed
+    window's one-step reward minus C = 3's (so C = 3's own column is zero and the best is at
+    least zero), and the learned policy takes the setting with the highest predicted
+    advantage, C = 3 where none is above zero (a tree fitted to a planted rule)."""
+    import importlib.util
+    import json
+
+    from sklearn.tree import DecisionTreeRegressor
+
+    cache = tmp_path / "cache"
+    args = ["--fit-seeds", "1", "--select-seeds", "1", "--seeds", "2", "--workers", "1"]
+    result = run_script("clairvoyant_imitation.py", *args, "--cache", str(cache))
+    assert result.returncode == 0, result.stderr
+    assert re.search(r"evaluation seeds 0-1, min leaf \d+: .* paired [+-]", result.stdout)
+    (records_file,) = cache.glob("records-*.json")
+    records = json.loads(records_file.read_text())
+    advantages = np.array(records["advantages"])
+    assert advantages.shape == (len(records["observations"]), 9)
+    assert np.all(advantages[:, 1] == 0) and np.all(advantages.max(axis=1) >= 0)
+
+    spec = importlib.util.spec_from_file_location(
+        "clairvoyant_imitation", ROOT / "scripts" / "clairvoyant_imitation.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    x = np.linspace(0, 1, 40)[:, None]
+    y = np.zeros((40, 3))
+    y[x[:, 0] > 0.5, 2] = 1.0  # the third setting pays above 0.5
+    y[x[:, 0] <= 0.5, 0] = -1.0  # the first costs below it
+    tree = DecisionTreeRegressor(min_samples_leaf=5).fit(x, y)
+    policy = module.AdvantagePolicy(tree, ["a", "b", "c"], fallback=1)
+    assert [policy.predict([value]) for value in (0.1, 0.45, 0.6, 0.9)] == ["b", "b", "c", "c"]
+    refused = run_script("clairvoyant_imitation.py", "--best", "fixed C=7", *args)
+    assert refused.returncode == 2 and "--best must be one of" in refused.stderr

@@ -15,6 +15,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from agents.rl.clairvoyant import GreedyClairvoyantPolicy
 from agents.rl.evaluation import ConstantPolicy, ModelPolicy, RandomPolicy, run_policy_episode
 from agents.rl.training import load_agent
 from dgpt_gym import __version__
@@ -29,8 +30,9 @@ AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
 def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None = None):
     """A policy from a picklable description: ``kind`` ``"agent"`` (``setting`` the folder
     :func:`agents.rl.training.train_agent` wrote), ``"constant"`` (``setting`` the action),
-    ``"random"`` (seeded with ``seed``), or a key of ``rules`` (a policy class called with
-    the ``setting`` dict as keyword arguments)."""
+    ``"random"`` (seeded with ``seed``), ``"clairvoyant"`` (the greedy one of
+    :mod:`agents.rl.clairvoyant`; ``setting`` the action it keeps among ties, or None), or a key of ``rules`` (a policy class
+    called with the ``setting`` dict as keyword arguments)."""
     if kind == "agent":
         model, config = load_agent(setting)
         return ModelPolicy(model, config["normalizer"])
@@ -38,8 +40,10 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
         return ConstantPolicy(setting)
     if kind == "random":
         return RandomPolicy(env.action_space, seed=seed)
+    if kind == "clairvoyant":
+        return GreedyClairvoyantPolicy(env, prefer=setting)
     if rules is None or kind not in rules:
-        allowed = ["agent", "constant", "random", *(rules or {})]
+        allowed = ["agent", "constant", "random", "clairvoyant", *(rules or {})]
         raise ValueError(f"kind must be one of {allowed}; got {kind!r}")
     return rules[kind](**setting)
 

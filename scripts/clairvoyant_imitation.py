@@ -1,0 +1,187 @@
+"""Can a policy that sees only the observation take the clairvoyant's gain? A one-step
+improvement of the best fixed setting, learned from the observation.
+
+The greedy clairvoyant policy (:mod:`agents.rl.clairvoyant`) beats the best fixed window or
+gate threshold by knowing each step's error. This script asks how much of that an
+observation can predict:
+
+1. On fit seeds (1000 onwards) it runs the best fixed setting and, at every step, tries every
+   fixed setting on copies of the environment, recording the observation and each
+   setting's reward minus the best fixed setting's (its one-step advantage).
+2. A regression tree (scikit-learn) learns the advantages from the observation; the policy
+   takes the setting with the highest predicted advantage, and the best fixed setting where
+   none is predicted above zero. That is one step of policy improvement over the best
+   fixed setting, with the observation as its only input. The tree's minimum leaf size is
+   chosen by the mean return on the selection seeds that follow the fit seeds.
+3. On the evaluation seeds 0..N-1 it reports the learned policy's return paired with the
+   best fixed setting's, seed by seed.
+
+If the learned policy gains nothing, the clairvoyant's gain rests on what the observation
+does not show, and no agent with this observation could be expected to take it.
+
+    python scripts/clairvoyant_imitation.py --env DGPTrackWindow-v0
+    python scripts/clairvoyant_imitation.py --env DGPTrackGating-v0
+
+Each fit seed's records are cached in ``results/rl/clairvoyant_imitation`` as they finish.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+from sklearn.tree import DecisionTreeRegressor  # noqa: E402
+
+import dgpt_gym  # noqa: E402, F401  (registers the environments)
+from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
+from agents.rl.cli import parse_kwargs  # noqa: E402
+from agents.rl.evaluation import (  # noqa: E402
+    ConstantPolicy,
+    paired_interval,
+    run_policy_episode,
+)
+
+ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
+DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
+LEAF_SIZES = (50, 200, 800)
+"""Minimum samples per leaf tried for the tree (about 150 steps per seed)."""
+
+
+class AdvantagePolicy:
+    """The fixed setting with the highest advantage the ``tree`` predicts from the
+    observation over ``fallback`` (the best fixed setting), or ``fallback`` where none is
+    predicted above zero."""
+
+    def __init__(self, tree, actions: list, fallback: int) -> None:
+        self.tree, self.actions, self.fallback = tree, actions, fallback
+
+    def predict(self, observation):
+        advantage = self.tree.predict(np.asarray(observation, dtype=float)[None])[0]
+        best = int(np.argmax(advantage))
+        return self.actions[best if advantage[best] > 0 else self.fallback]
+
+
+def best_fixed_records(task) -> dict[str, list]:
+    """One episode of the best fixed setting on ``seed``; at every step the observation and
+    every fixed setting's one-step reward minus the best fixed setting's."""
+    env_id, env_kwargs, best, seed = task
+    env = gym.make(env_id, **env_kwargs)
+    trials = GreedyClairvoyantPolicy(env)
+    observation, _ = env.reset(seed=seed)
+    observations, advantages, done = [], [], False
+    while not done:
+        trials.predict(observation)
+        observations.append(np.asarray(observation, dtype=float).tolist())
+        advantages.append((trials.last_rewards - trials.last_rewards[best]).tolist())
+        observation, _, terminated, truncated, _ = env.step(trials.actions[best])
+        done = terminated or truncated
+    return {"observations": observations, "advantages": advantages}
+
+
+def cached_records(task_and_cache) -> dict[str, list]:
+    task, cache = task_and_cache
+    key = json.dumps([dgpt_gym.__version__, *task], sort_keys=True, default=str)
+    path = cache / f"records-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    records = best_fixed_records(task)
+    temporary = path.with_suffix(".tmp")
+    temporary.write_text(json.dumps(records))
+    temporary.replace(path)
+    return records
+
+
+def returns_of(task) -> list[float]:
+    env_id, env_kwargs, policy, seeds = task
+    env = gym.make(env_id, **env_kwargs)
+    return [run_policy_episode(env, policy, seed)["return"] for seed in seeds]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS)
+    parser.add_argument("--fit-seeds", type=int, default=30, help="seeds 1000..1000+N-1")
+    parser.add_argument("--select-seeds", type=int, default=10, help="the seeds after them")
+    parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
+    parser.add_argument(
+        "--best",
+        help="the best fixed setting's name (default: C=3 or 8.38, "
+        "docs/rl_window_v0.md's and rl_gating_v0.md's choice on training seeds)",
+    )
+    parser.add_argument("--env-kwargs", nargs="*", default=DEFAULT_ENV_KWARGS, metavar="KEY=VALUE")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument(
+        "--cache", type=Path, default=ROOT / "results" / "rl" / "clairvoyant_imitation"
+    )
+    args = parser.parse_args(argv)
+    if min(args.fit_seeds, args.select_seeds, args.seeds, args.workers) < 1:
+        parser.error("--fit-seeds, --select-seeds, --seeds and --workers must be >= 1")
+    try:
+        env_kwargs = parse_kwargs(args.env_kwargs)
+        env = gym.make(args.env, **env_kwargs)
+    except (TypeError, ValueError) as error:
+        parser.error(f"--env-kwargs: {error}")
+    settings, _ = env.unwrapped.fixed_actions()
+    names, actions = list(settings), list(settings.values())
+    best_name = args.best or ("fixed C=3" if args.env == ENV_IDS[0] else "fixed threshold 8.38")
+    if best_name not in names:
+        parser.error(f"--best must be one of {names}; got {best_name!r}")
+    best = names.index(best_name)
+
+    args.cache.mkdir(parents=True, exist_ok=True)
+    fit = range(1000, 1000 + args.fit_seeds)
+    select = range(fit[-1] + 1, fit[-1] + 1 + args.select_seeds)
+    evaluation = range(args.seeds)
+    with ProcessPoolExecutor(args.workers) as pool:
+        tasks = [((args.env, env_kwargs, best, seed), args.cache) for seed in fit]
+        records = list(pool.map(cached_records, tasks))
+        x = np.concatenate([np.array(r["observations"]) for r in records])
+        y = np.concatenate([np.array(r["advantages"]) for r in records])
+        print(
+            f"{len(x)} steps on fit seeds {fit[0]}-{fit[-1]}; one-step advantage over "
+            f"{best_name}, mean of the best per step {y.max(axis=1).mean():.4f}"
+        )
+
+        def policy(leaf):
+            tree = DecisionTreeRegressor(min_samples_leaf=leaf, random_state=0).fit(x, y)
+            return AdvantagePolicy(tree, actions, best)
+
+        def returns(policy_, seeds):
+            chunks = [list(seeds)[i :: args.workers] for i in range(args.workers)]
+            parts = pool.map(returns_of, [(args.env, env_kwargs, policy_, c) for c in chunks])
+            by_seed = dict(zip((s for c in chunks for s in c), (r for p in parts for r in p)))
+            return np.array([by_seed[s] for s in seeds])
+
+        fixed_select = returns(ConstantPolicy(actions[best]), select)
+        scores = {}
+        for leaf in LEAF_SIZES:
+            scores[leaf] = float(np.mean(returns(policy(leaf), select) - fixed_select))
+            print(
+                f"selection seeds {select[0]}-{select[-1]}: min leaf {leaf:4d}, "
+                f"mean return - {best_name} {scores[leaf]:+.3f}"
+            )
+        leaf = max(scores, key=scores.get)
+        learned = returns(policy(leaf), evaluation)
+        fixed = returns(ConstantPolicy(actions[best]), evaluation)
+    difference, half = paired_interval(learned - fixed)
+    print(
+        f"\nevaluation seeds 0-{args.seeds - 1}, min leaf {leaf}: learned one-step "
+        f"improvement {learned.mean():.2f}, {best_name} {fixed.mean():.2f}, "
+        f"paired {difference:+.2f} +- {half:.2f}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
