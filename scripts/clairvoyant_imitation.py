@@ -22,7 +22,8 @@ does not show, and no agent with this observation could be expected to take it.
     python scripts/clairvoyant_imitation.py --env DGPTrackWindow-v0
     python scripts/clairvoyant_imitation.py --env DGPTrackGating-v0
 
-Each fit seed's records are cached in ``results/rl/clairvoyant_imitation`` as they finish.
+Each fit seed's records and each fixed setting's training episodes are cached in
+``results/rl/clairvoyant_imitation`` (``--cache``) as they finish.
 """
 
 from __future__ import annotations
@@ -45,15 +46,14 @@ from sklearn.tree import DecisionTreeRegressor  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
-from agents.rl.cli import parse_kwargs  # noqa: E402
+from agents.rl.cli import TUNING_ENV_IDS, TUNING_TASK_KWARGS, parse_kwargs  # noqa: E402
 from agents.rl.evaluation import (  # noqa: E402
     ConstantPolicy,
     paired_interval,
     run_policy_episode,
 )
+from agents.rl.runs import best_fixed_setting  # noqa: E402
 
-ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
-DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
 LEAF_SIZES = (50, 200, 800)
 """Minimum samples per leaf tried for the tree (about 150 steps per seed)."""
 
@@ -110,23 +110,27 @@ def returns_of(task) -> list[float]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS)
+    parser.add_argument("--env", default=TUNING_ENV_IDS[0], choices=TUNING_ENV_IDS)
     parser.add_argument("--fit-seeds", type=int, default=30, help="seeds 1000..1000+N-1")
     parser.add_argument("--select-seeds", type=int, default=10, help="the seeds after them")
     parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds 0..N-1")
     parser.add_argument(
-        "--best",
-        help="the best fixed setting's name (default: C=3 or 8.38, "
-        "docs/rl_window_v0.md's and rl_gating_v0.md's choice on training seeds)",
+        "--training-seeds",
+        type=int,
+        default=20,
+        help="seeds 1000.. on which the best fixed setting is chosen, as "
+        "scripts/tuning_baselines.py chooses it",
     )
-    parser.add_argument("--env-kwargs", nargs="*", default=DEFAULT_ENV_KWARGS, metavar="KEY=VALUE")
+    parser.add_argument("--env-kwargs", nargs="*", default=TUNING_TASK_KWARGS, metavar="KEY=VALUE")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
         "--cache", type=Path, default=ROOT / "results" / "rl" / "clairvoyant_imitation"
     )
     args = parser.parse_args(argv)
-    if min(args.fit_seeds, args.select_seeds, args.seeds, args.workers) < 1:
-        parser.error("--fit-seeds, --select-seeds, --seeds and --workers must be >= 1")
+    if min(args.fit_seeds, args.select_seeds, args.seeds, args.workers, args.training_seeds) < 1:
+        parser.error(
+            "--fit-seeds, --select-seeds, --seeds, --training-seeds and --workers must be >= 1"
+        )
     try:
         env_kwargs = parse_kwargs(args.env_kwargs)
         env = gym.make(args.env, **env_kwargs)
@@ -134,10 +138,15 @@ def main(argv=None) -> int:
         parser.error(f"--env-kwargs: {error}")
     settings, _ = env.unwrapped.fixed_actions()
     names, actions = list(settings), list(settings.values())
-    best_name = args.best or ("fixed C=3" if args.env == ENV_IDS[0] else "fixed threshold 8.38")
-    if best_name not in names:
-        parser.error(f"--best must be one of {names}; got {best_name!r}")
+    best_name, _ = best_fixed_setting(
+        args.env,
+        env_kwargs,
+        range(1000, 1000 + args.training_seeds),
+        args.workers,
+        args.cache,
+    )
     best = names.index(best_name)
+    print(f"best fixed setting on training seeds 1000-{999 + args.training_seeds}: {best_name}")
 
     args.cache.mkdir(parents=True, exist_ok=True)
     fit = range(1000, 1000 + args.fit_seeds)

@@ -4,8 +4,11 @@ intervals.
 1. Runs every fixed setting of the task (``fixed_actions()``: every window length C, or nine
    gate thresholds) on the training seeds (1000 onwards) and keeps the one with the best
    mean return, the "best fixed setting".
-2. Runs every fixed setting, a random policy and each trained agent (``--models``, folders
-   of ``scripts/train_rl.py``, evaluated without training) on the evaluation seeds 0..N-1
+   The task's adaptive rule (:mod:`agents.rl.tuning_rules`: a tight gate while the track is
+   quiet, or a window chosen by the last step's surprise) is tuned on the same seeds.
+2. Runs every fixed setting, the tuned rule, a random policy and each trained agent
+   (``--models``, folders of ``scripts/train_rl.py``, evaluated without training) on the
+   evaluation seeds 0..N-1
    (``--first-seed 1000``: on the training seeds, to choose between agents).
    With the default ``trajectory=random layout=per_episode`` these are paths and sensor
    layouts that no training episode used.
@@ -44,17 +47,20 @@ import gymnasium as gym  # noqa: E402
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.clairvoyant import hindsight_best_per_seed  # noqa: E402
-from agents.rl.cli import add_evaluation_arguments, parse_kwargs  # noqa: E402
+from agents.rl.cli import (  # noqa: E402
+    TUNING_ENV_IDS,
+    TUNING_TASK_KWARGS,
+    add_evaluation_arguments,
+    parse_kwargs,
+)
 from agents.rl.evaluation import (  # noqa: E402
     agents_against,
     iqm_interval,
     policy_cells,
 )
-from agents.rl.runs import check_agent_folders, run_policies  # noqa: E402
+from agents.rl.runs import best_fixed_setting, check_agent_folders, run_policies  # noqa: E402
+from agents.rl.tuning_rules import TUNING_RULE_GRIDS, TUNING_RULES  # noqa: E402
 
-ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
-DEFAULT_ENV_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
-"""The documented task: S3 at clutter rate 5, a random path in a layout drawn from the seed."""
 KNOB_LABELS = {"window": "mean window C", "gate_threshold": "mean gate threshold"}
 CLAIRVOYANT = "clairvoyant, greedy per step (sees the truth)"
 HINDSIGHT = "clairvoyant, best fixed per episode (hindsight)"
@@ -62,7 +68,7 @@ HINDSIGHT = "clairvoyant, best fixed per episode (hindsight)"
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default=ENV_IDS[0], choices=ENV_IDS, help="the task")
+    parser.add_argument("--env", default=TUNING_ENV_IDS[0], choices=TUNING_ENV_IDS, help="the task")
     parser.add_argument("--seeds", type=int, default=100, help="evaluation seeds F..F+N-1")
     parser.add_argument(
         "--first-seed",
@@ -75,9 +81,9 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--env-kwargs",
         nargs="*",
-        default=DEFAULT_ENV_KWARGS,
+        default=TUNING_TASK_KWARGS,
         metavar="KEY=VALUE",
-        help=f"environment arguments (default: {' '.join(DEFAULT_ENV_KWARGS)})",
+        help=f"environment arguments (default: {' '.join(TUNING_TASK_KWARGS)})",
     )
     parser.add_argument(
         "--clairvoyant",
@@ -112,21 +118,29 @@ def main(argv=None) -> int:
 
     # 1. the best fixed setting on training seeds
     training = range(1000, 1000 + args.training_seeds)
-    fixed = [("constant", action) for action in constants.values()]
-    scores = {
-        name: float(np.mean([row["return"] for row in rows]))
-        for name, rows in zip(
-            constants,
-            run_policies(fixed, args.env, env_kwargs, training, args.workers, cache=args.cache),
-        )
-    }
-    best = max(scores, key=scores.get)
+    best, scores = best_fixed_setting(args.env, env_kwargs, training, args.workers, args.cache)
     for name, score in scores.items():
         print(f"training  {name:28s} mean return {score:9.2f}")
+
+    # the task's adaptive rule, tuned on the same training seeds
+    grids = TUNING_RULE_GRIDS.get(args.env, {})
+    tuning = [(kind, setting) for kind, grid in grids.items() for setting in grid]
+    tuned = {}
+    rows_by_setting = run_policies(
+        tuning, args.env, env_kwargs, training, args.workers, TUNING_RULES, args.cache
+    )
+    for (kind, setting), rows in zip(tuning, rows_by_setting):
+        score = float(np.mean([row["return"] for row in rows]))
+        print(f"training  {kind} {setting}: mean return {score:9.2f}")
+        if kind not in tuned or score > tuned[kind][1]:
+            tuned[kind] = (setting, score)
 
     # 2. every policy on the evaluation seeds
     policies = {name: ("constant", action) for name, action in constants.items()}
     policies["random"] = ("random", None)
+    for kind, (setting, _) in tuned.items():
+        label = ", ".join(f"{key}={value}" for key, value in setting.items())
+        policies[f"{kind} ({label}; tuned on training seeds)"] = (kind, setting)
     if args.clairvoyant:
         policies[CLAIRVOYANT] = ("clairvoyant", constants[best])
     for folder in args.models:
@@ -138,7 +152,8 @@ def main(argv=None) -> int:
         env_kwargs,
         evaluation,
         args.workers,
-        cache=args.cache,
+        TUNING_RULES,
+        args.cache,
     )
     by_name = dict(zip(names, results))
     if args.clairvoyant:
@@ -157,7 +172,7 @@ def main(argv=None) -> int:
         + (f" --training-seeds {args.training_seeds}" if args.training_seeds != 20 else "")
         + (
             f" --env-kwargs {' '.join(args.env_kwargs)}"
-            if args.env_kwargs != DEFAULT_ENV_KWARGS
+            if args.env_kwargs != TUNING_TASK_KWARGS
             else ""
         )
         + (" --models " + " ".join(str(path) for path in args.models) if args.models else "")
@@ -167,8 +182,15 @@ def main(argv=None) -> int:
         f"# {args.env}: fixed settings and agents ({', '.join(args.env_kwargs)})",
         "",
         f"Generated by `{command}`. The best fixed setting, **{best}**, has the best mean "
-        f"return on the training seeds 1000-{999 + args.training_seeds}; every row is on the "
-        f"evaluation seeds {seed_range}. IQM: interquartile mean of the episode returns "
+        f"return on the training seeds 1000-{999 + args.training_seeds}"
+        + (
+            ", and the rule's setting is the best of its grid there "
+            f"(`agents.rl.tuning_rules.TUNING_RULE_GRIDS`, {len(tuning)} settings)"
+            if tuned
+            else ""
+        )
+        + f"; every row is on the evaluation seeds {seed_range}. IQM: interquartile mean "
+        "of the episode returns "
         "with a 95 % bootstrap interval; paired: the mean per-seed return difference to the "
         "best fixed setting with a 95 % t interval.",
         "",
@@ -239,6 +261,7 @@ def main(argv=None) -> int:
         "random": dict(fmt="x", color="k"),
         "agent": dict(fmt="D", color="C3"),
         "clairvoyant": dict(fmt="*", color="C0", ms=9),
+        **{kind: dict(fmt="^", color="C2") for kind in TUNING_RULES},
         "hindsight": dict(fmt="s", color="C0"),
     }
     for name, (knob_mean, iqm, low, high) in points.items():
@@ -248,7 +271,7 @@ def main(argv=None) -> int:
         axis.errorbar(
             knob_mean, iqm, yerr=[[iqm - low], [high - iqm]], capsize=2, **{"ms": 5, **style[kind]}
         )
-        if kind not in ("agent", "clairvoyant", "hindsight"):
+        if kind in ("constant", "random"):
             axis.annotate(
                 name.removeprefix("fixed ") + (" (best fixed)" if name == best else ""),
                 (knob_mean, iqm),
@@ -271,6 +294,8 @@ def main(argv=None) -> int:
     axis.set_xlabel(f"{knob_label} per step")
     axis.set_ylabel("IQM episode return (95 % CI)")
     title = f"{args.env}, seeds {seed_range}; red diamonds: the agents"
+    if tuned:
+        title += "; green triangle: the tuned rule"
     if args.clairvoyant:
         title += ";\nblue: clairvoyant (star greedy per step, square best fixed per episode)"
     axis.set_title(title, fontsize=9)

@@ -235,8 +235,8 @@ def test_sensors_baselines_and_agent_actions_run_on_a_few_seeds(tmp_path):
 
 def test_tuning_baselines_runs_on_a_few_seeds_and_refuses_other_tasks_agents(tmp_path):
     """The script behind docs/rl_window_v0.md on 2 evaluation seeds (the documented run uses
-    100): every fixed window, the random policy, the clairvoyant references, the agent and
-    the agents together have a row, the best fixed setting is marked, the paired table
+    100): every fixed window, the tuned rule, the random policy, the clairvoyant references,
+    the agent and the agents together have a row, the best fixed setting is marked, the paired table
     compares the agents with it, and the figure is written. The best fixed window per
     episode with hindsight has, on every seed, the best fixed window's return, so its mean
     is the highest of the fixed rows'. An agent trained on another task is refused, naming
@@ -260,10 +260,13 @@ def test_tuning_baselines_runs_on_a_few_seeds_and_refuses_other_tasks_agents(tmp
     assert np.isfinite(greedy)
     for row in ("| random |", "| agent window-ppo-seed0 |", "| **1 agents together** |"):
         assert row in table
+    assert re.search(
+        r"^\| surprise window \(quiet=\d, surprised=\d, .*tuned on training", table, re.M
+    )
     training = dict(
         re.match(r"training\s+(.+?)\s+mean return\s+(\S+)", line).groups()
         for line in result.stdout.splitlines()
-        if line.startswith("training")
+        if line.startswith("training  fixed")
     )
     best = max(training, key=lambda name: float(training[name]))
     assert len(training) == 9 and f"| {best} (best fixed, training seeds) |" in table
@@ -477,24 +480,32 @@ def test_calibration_misses_tallies_by_hand():
 
 def test_clairvoyant_imitation_records_advantages_and_acts_on_them(tmp_path):
     """scripts/clairvoyant_imitation.py on a few seeds: each step's record holds every fixed
-    window's one-step reward minus C = 3's (so C = 3's own column is zero and the best is at
-    least zero), and the learned policy takes the setting with the highest predicted
-    advantage, C = 3 where none is above zero (a tree fitted to a planted rule)."""
+    window's one-step reward minus the best fixed window's (so that window's own column is
+    zero and the best is at least zero), and the learned policy takes the setting with the
+    highest predicted advantage, the fallback where none is above zero (a tree fitted to a
+    planted rule)."""
     import importlib.util
     import json
 
     from sklearn.tree import DecisionTreeRegressor
 
+    from agents.rl.tuning_envs import DEFAULT_WINDOWS
+
     cache = tmp_path / "cache"
     args = ["--fit-seeds", "1", "--select-seeds", "1", "--seeds", "2", "--workers", "1"]
+    args += ["--training-seeds", "1"]
     result = run_script("clairvoyant_imitation.py", *args, "--cache", str(cache))
     assert result.returncode == 0, result.stderr
     assert re.search(r"evaluation seeds 0-1, min leaf \d+: .* paired [+-]", result.stdout)
+    best = re.search(
+        r"best fixed setting on training seeds 1000-1000: fixed C=(\d+)", result.stdout
+    )
+    best_column = DEFAULT_WINDOWS.index(int(best.group(1)))
     (records_file,) = cache.glob("records-*.json")
     records = json.loads(records_file.read_text())
     advantages = np.array(records["advantages"])
     assert advantages.shape == (len(records["observations"]), 9)
-    assert np.all(advantages[:, 1] == 0) and np.all(advantages.max(axis=1) >= 0)
+    assert np.all(advantages[:, best_column] == 0) and np.all(advantages.max(axis=1) >= 0)
 
     spec = importlib.util.spec_from_file_location(
         "clairvoyant_imitation", ROOT / "scripts" / "clairvoyant_imitation.py"
@@ -508,5 +519,5 @@ def test_clairvoyant_imitation_records_advantages_and_acts_on_them(tmp_path):
     tree = DecisionTreeRegressor(min_samples_leaf=5).fit(x, y)
     policy = module.AdvantagePolicy(tree, ["a", "b", "c"], fallback=1)
     assert [policy.predict([value]) for value in (0.1, 0.45, 0.6, 0.9)] == ["b", "b", "c", "c"]
-    refused = run_script("clairvoyant_imitation.py", "--best", "fixed C=7", *args)
-    assert refused.returncode == 2 and "--best must be one of" in refused.stderr
+    refused = run_script("clairvoyant_imitation.py", *args, "--seeds", "0")
+    assert refused.returncode == 2 and "must be >= 1" in refused.stderr

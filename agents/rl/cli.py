@@ -29,6 +29,11 @@ from agents.rl.training import (
 RL_EXTRA = ("stable_baselines3", "torch")
 """What the 'rl' extra installs and training needs."""
 
+TUNING_ENV_IDS = ("DGPTrackWindow-v0", "DGPTrackGating-v0")
+TUNING_TASK_KWARGS = ["scenario=S3", "clutter_rate=5", "trajectory=random", "layout=per_episode"]
+"""The documented window and gating task: S3 at clutter rate 5, a random path in a layout
+drawn from the seed (``scripts/tuning_baselines.py``, ``scripts/clairvoyant_imitation.py``)."""
+
 ENV_ALIASES = {environment.alias: environment.id for environment in ENVIRONMENTS}
 PER_STEP = {environment.id: environment.per_step for environment in ENVIRONMENTS}
 

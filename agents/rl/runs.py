@@ -20,7 +20,13 @@ from agents.rl.evaluation import ConstantPolicy, ModelPolicy, RandomPolicy, run_
 from agents.rl.training import load_agent
 from dgpt_gym import __version__
 
-__all__ = ["AGENT_FILES", "make_policy", "check_agent_folders", "run_policies"]
+__all__ = [
+    "AGENT_FILES",
+    "make_policy",
+    "check_agent_folders",
+    "run_policies",
+    "best_fixed_setting",
+]
 
 AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
 """What :func:`agents.rl.training.train_agent` saves of an agent (the last one only with
@@ -146,3 +152,31 @@ def run_policies(
         return [_run_cached(task) for task in tasks]
     with ProcessPoolExecutor(workers) as pool:
         return list(pool.map(_run_cached, tasks))
+
+
+def best_fixed_setting(
+    env_id: str,
+    env_kwargs: dict,
+    seeds: Iterable[int],
+    workers: int | None = None,
+    cache: str | Path | None = None,
+) -> tuple[str, dict[str, float]]:
+    """The name of the environment's fixed setting (``fixed_actions()`` of
+    :class:`agents.rl.base.TrackerInsideEnv`) with the best mean return on ``seeds`` (give
+    training seeds), and every setting's mean return, by :func:`run_policies`."""
+    env = gym.make(env_id, **env_kwargs)
+    settings, _ = env.unwrapped.fixed_actions()
+    env.close()
+    results = run_policies(
+        [("constant", action) for action in settings.values()],
+        env_id,
+        env_kwargs,
+        seeds,
+        workers,
+        cache=cache,
+    )
+    scores = {
+        name: float(np.mean([row["return"] for row in rows]))
+        for name, rows in zip(settings, results)
+    }
+    return max(scores, key=scores.get), scores

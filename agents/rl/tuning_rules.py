@@ -1,0 +1,109 @@
+"""Adaptive rules for the tuning tasks (``DGPTrackGating-v0``, ``DGPTrackWindow-v0``) that
+read only the observation (:data:`agents.rl.features.FEATURE_NAMES`), the baselines a learned
+agent has to beat beside the fixed settings.
+
+Both switch between two settings on the last step's surprise: the mean distance of the
+gated summaries from their predictions (``innovation``). The greedy clairvoyant policy
+(:mod:`agents.rl.clairvoyant`) gains by tight gates and by leaving C = 3 on many steps; these
+rules test the simplest observable reading of that: a tight gate while the track is quiet
+(the prediction was right last step), and a window chosen by the last surprise.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agents.rl.features import FEATURE_NAMES
+from agents.rl.tuning_envs import DEFAULT_WINDOWS
+
+__all__ = ["QuietTrackGatePolicy", "SurpriseWindowPolicy", "TUNING_RULES", "TUNING_RULE_GRIDS"]
+
+_FEATURE = {name: index for index, name in enumerate(FEATURE_NAMES)}
+
+
+def _surprise_m(observation, sensing_range: float) -> float:
+    """The last step's mean innovation in metres (the feature is scaled by the range)."""
+    return float(observation[_FEATURE["innovation"]]) * sensing_range
+
+
+def _quiet(observation, quiet_m: float, sensing_range: float) -> bool:
+    """The tracker has experts, the last step had measurements, and their summaries lay
+    within ``quiet_m`` of the predictions on average."""
+    has_model = observation[_FEATURE["n_experts"]] > 0
+    silent = observation[_FEATURE["silent_steps"]] > 0
+    return bool(has_model and not silent and _surprise_m(observation, sensing_range) < quiet_m)
+
+
+class QuietTrackGatePolicy:
+    """``DGPTrackGating-v0``: the gate threshold ``tight`` while the track is quiet (the last
+    step's summaries lay within ``quiet_m`` metres of their predictions on average, and it
+    had measurements), else ``loose``. Thresholds are Mahalanobis distances, mapped to the
+    action as the environment maps it back (its default range 1-30)."""
+
+    def __init__(
+        self,
+        tight: float,
+        quiet_m: float,
+        loose: float,
+        min_threshold: float = 1.0,
+        max_threshold: float = 30.0,
+        sensing_range: float = 50.0,
+    ) -> None:
+        span = math.log(max_threshold / min_threshold)
+
+        def action(threshold: float) -> np.ndarray:
+            position = math.log(threshold / min_threshold) / span
+            return np.array([2.0 * position - 1.0], dtype=np.float32)
+
+        self.tight, self.loose = action(tight), action(loose)
+        self.quiet_m, self.sensing_range = float(quiet_m), float(sensing_range)
+
+    def predict(self, observation):
+        return self.tight if _quiet(observation, self.quiet_m, self.sensing_range) else self.loose
+
+
+class SurpriseWindowPolicy:
+    """``DGPTrackWindow-v0``: the window ``surprised`` after a step whose summaries lay more
+    than ``surprise_m`` metres from their predictions on average (or without measurements),
+    else ``quiet``; windows are lengths C of ``windows``."""
+
+    def __init__(
+        self,
+        quiet: int,
+        surprised: int,
+        surprise_m: float,
+        windows: tuple[int, ...] = DEFAULT_WINDOWS,
+        sensing_range: float = 50.0,
+    ) -> None:
+        self.quiet, self.surprised = windows.index(quiet), windows.index(surprised)
+        self.surprise_m, self.sensing_range = float(surprise_m), float(sensing_range)
+
+    def predict(self, observation):
+        quiet = _quiet(observation, self.surprise_m, self.sensing_range)
+        return self.quiet if quiet else self.surprised
+
+
+TUNING_RULES = {"quiet-track gate": QuietTrackGatePolicy, "surprise window": SurpriseWindowPolicy}
+"""The rules by name, as :func:`agents.rl.runs.run_policies` takes them."""
+
+TUNING_RULE_GRIDS = {
+    "DGPTrackGating-v0": {
+        "quiet-track gate": [
+            {"tight": tight, "quiet_m": quiet, "loose": loose}
+            for tight in (1.53, 2.34, 3.58)
+            for quiet in (1.0, 2.0, 4.0)
+            for loose in (8.38, 30.0)
+        ]
+    },
+    "DGPTrackWindow-v0": {
+        "surprise window": [
+            {"quiet": quiet, "surprised": surprised, "surprise_m": surprise}
+            for quiet, surprised in ((2, 3), (3, 2), (3, 4))
+            for surprise in (2.0, 5.0, 10.0)
+        ]
+    },
+}
+"""The settings each task's rule is tuned over on training seeds (thresholds of the
+environment's fixed grid; windows next to the best fixed C = 3)."""

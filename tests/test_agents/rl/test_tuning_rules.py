@@ -1,0 +1,64 @@
+"""The adaptive rules of the tuning tasks (agents/rl/tuning_rules.py) on hand-made
+observations: which setting each situation gets, and the thresholds and windows through the
+environments' own action maps."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.rl.features import FEATURE_NAMES
+from agents.rl.tuning_rules import (
+    TUNING_RULE_GRIDS,
+    TUNING_RULES,
+    QuietTrackGatePolicy,
+    SurpriseWindowPolicy,
+)
+
+INDEX = {name: i for i, name in enumerate(FEATURE_NAMES)}
+
+
+def observation(experts=3, innovation_m=1.0, silent_steps=0):
+    vector = np.zeros(len(FEATURE_NAMES), dtype=np.float32)
+    vector[INDEX["n_experts"]] = experts / 10
+    vector[INDEX["innovation"]] = innovation_m / 50.0
+    vector[INDEX["silent_steps"]] = silent_steps / 10
+    return vector
+
+
+@pytest.mark.parametrize(
+    "situation, tight",
+    [
+        (dict(innovation_m=1.9), True),  # quiet: within 2 m
+        (dict(innovation_m=2.1), False),  # surprised
+        (dict(innovation_m=0.5, silent_steps=1), False),  # the last step had no data
+        (dict(experts=0, innovation_m=0.0), False),  # no model yet
+    ],
+)
+def test_the_quiet_track_gate_is_tight_only_while_the_track_is_quiet(situation, tight):
+    env = gym.make("DGPTrackGating-v0").unwrapped
+    policy = QuietTrackGatePolicy(tight=2.34, quiet_m=2.0, loose=30.0)
+    threshold = env.threshold(policy.predict(observation(**situation)))
+    assert threshold == pytest.approx(2.34 if tight else 30.0, rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "situation, window",
+    [
+        (dict(innovation_m=4.9), 2),
+        (dict(innovation_m=5.1), 3),
+        (dict(innovation_m=0.0, silent_steps=2), 3),
+    ],
+)
+def test_the_surprise_window_follows_the_last_steps_innovation(situation, window):
+    env = gym.make("DGPTrackWindow-v0").unwrapped
+    policy = SurpriseWindowPolicy(quiet=2, surprised=3, surprise_m=5.0)
+    assert env.windows[policy.predict(observation(**situation))] == window
+
+
+def test_every_grid_setting_makes_a_rule_that_acts_in_its_environment():
+    for env_id, grids in TUNING_RULE_GRIDS.items():
+        env = gym.make(env_id)
+        for kind, grid in grids.items():
+            for setting in grid:
+                action = TUNING_RULES[kind](**setting).predict(observation())
+                assert env.action_space.contains(action), (env_id, setting, action)
