@@ -122,6 +122,11 @@ def main(argv=None) -> int:
     seeds = range(args.seeds)
     counts = collections.defaultdict(collections.Counter)
     configs = {}
+    first = load_agent(args.models[0])[1]
+    if args.clairvoyant is not None:
+        settings = gym.make(first["env"], **first["env_kwargs"]).unwrapped.fixed_actions()[0]
+        if args.clairvoyant not in settings:
+            parser.error(f"--clairvoyant must be one of {list(settings)}; got {args.clairvoyant!r}")
     for folder in args.models:
         model, config = load_agent(folder)
         configs[(config["env"], repr(sorted(config["env_kwargs"].items())))] = config
@@ -133,10 +138,8 @@ def main(argv=None) -> int:
     env = gym.make(config["env"], **config["env_kwargs"])
     knob = env.unwrapped.knob
     print_table(f"{len(args.models)} agent(s), seeds 0-{args.seeds - 1}", knob, situations, counts)
-    if args.clairvoyant:
+    if args.clairvoyant is not None:
         settings, _ = env.unwrapped.fixed_actions()
-        if args.clairvoyant not in settings:
-            parser.error(f"--clairvoyant must be one of {list(settings)}; got {args.clairvoyant!r}")
         policy = GreedyClairvoyantPolicy(env, prefer=settings[args.clairvoyant])
         counts = collections.defaultdict(collections.Counter)
         tally(env, policy, seeds, counts)

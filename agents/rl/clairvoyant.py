@@ -41,12 +41,18 @@ class GreedyClairvoyantPolicy:
     :class:`agents.rl.base.TrackerInsideEnv`: every window length, or nine gate
     thresholds), the grid the best fixed setting is chosen from. Among candidates that tie
     for the best reward (a step without measurements, where no window or gate changes the
-    estimate) it keeps ``prefer`` if that is one of them (give the best fixed setting, so
-    that the policy leaves it only where another setting scores strictly better), else the
-    first. Costs one extra step and copy per candidate and step."""
+    estimate) it takes the one nearest ``prefer`` in candidate order (give the best fixed
+    setting, so that the policy leaves it only where another setting scores strictly
+    better, and no further than the tie needs), else the first. Costs one extra step and
+    copy per candidate and step; ``env`` must not render (each copy would draw)."""
 
     def __init__(self, env: gym.Env, actions: Sequence | None = None, prefer=None) -> None:
         self.env = env.unwrapped
+        if getattr(self.env, "render_mode", None) is not None:
+            raise ValueError(
+                "env must not render (render_mode None): every candidate's copy would draw; "
+                f"got render_mode={self.env.render_mode!r}"
+            )
         if actions is None:
             if not isinstance(self.env, TrackerInsideEnv):
                 raise ValueError(
@@ -61,7 +67,9 @@ class GreedyClairvoyantPolicy:
         if prefer is not None:
             matches = [i for i, action in enumerate(self.actions) if np.array_equal(action, prefer)]
             if not matches:
-                raise ValueError(f"prefer must be one of the candidate actions; got {prefer!r}")
+                raise ValueError(
+                    f"prefer must be one of the candidate actions {self.actions}; got {prefer!r}"
+                )
             self.preferred = matches[0]
         self.last_rewards = None
 
@@ -70,9 +78,10 @@ class GreedyClairvoyantPolicy:
             [copy.deepcopy(self.env).step(action)[1] for action in self.actions], dtype=float
         )
         self.last_rewards = rewards
-        best = int(np.argmax(rewards))
-        if self.preferred is not None and rewards[self.preferred] == rewards[best]:
-            best = self.preferred
+        tied = np.flatnonzero(rewards == rewards.max())
+        best = int(tied[0])
+        if self.preferred is not None:
+            best = int(tied[np.argmin(np.abs(tied - self.preferred))])
         return self.actions[best]
 
 

@@ -26,6 +26,7 @@ __all__ = [
     "check_agent_folders",
     "run_policies",
     "best_fixed_setting",
+    "cached_json",
 ]
 
 AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
@@ -113,14 +114,19 @@ def _run_cached(task_and_cache) -> list[dict]:
     task, cache = task_and_cache
     if cache is None:
         return _run_block(task)
-    path = _cache_file(cache, task)
+    return cached_json(_cache_file(cache, task), lambda: _run_block(task))
+
+
+def cached_json(path: Path, compute):
+    """The JSON value kept at ``path``, or ``compute()``'s, written there first through a
+    temporary file, so that a run interrupted while writing leaves no half file."""
     if path.exists():
         return json.loads(path.read_text())
-    rows = _run_block(task)
+    value = compute()
     temporary = path.with_suffix(".tmp")
-    temporary.write_text(json.dumps(rows))
-    temporary.replace(path)  # a run interrupted while writing leaves no half file
-    return rows
+    temporary.write_text(json.dumps(value))
+    temporary.replace(path)
+    return value
 
 
 def run_policies(

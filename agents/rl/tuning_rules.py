@@ -17,6 +17,7 @@ import numpy as np
 
 from agents.rl.features import FEATURE_NAMES
 from agents.rl.tuning_envs import DEFAULT_WINDOWS
+from dgpt_gym.validation import check_choice, check_real
 
 __all__ = ["QuietTrackGatePolicy", "SurpriseWindowPolicy", "TUNING_RULES", "TUNING_RULE_GRIDS"]
 
@@ -29,11 +30,13 @@ def _surprise_m(observation, sensing_range: float) -> float:
 
 
 def _quiet(observation, quiet_m: float, sensing_range: float) -> bool:
-    """The tracker has experts, the last step had measurements, and their summaries lay
-    within ``quiet_m`` of the predictions on average."""
+    """The tracker has experts, the last step had gated summaries (measurements that the
+    hard gate did not all drop: the innovation is then above zero), and they lay within
+    ``quiet_m`` of the predictions on average."""
     has_model = observation[_FEATURE["n_experts"]] > 0
     silent = observation[_FEATURE["silent_steps"]] > 0
-    return bool(has_model and not silent and _surprise_m(observation, sensing_range) < quiet_m)
+    surprise = _surprise_m(observation, sensing_range)
+    return bool(has_model and not silent and 0.0 < surprise < quiet_m)
 
 
 class QuietTrackGatePolicy:
@@ -51,6 +54,11 @@ class QuietTrackGatePolicy:
         max_threshold: float = 30.0,
         sensing_range: float = 50.0,
     ) -> None:
+        min_threshold = check_real("min_threshold", min_threshold, low=0.0, low_inclusive=False)
+        max_threshold = check_real("max_threshold", max_threshold, low=min_threshold)
+        loose = check_real("loose", loose, low=min_threshold, high=max_threshold)
+        tight = check_real("tight", tight, low=min_threshold, high=loose, high_inclusive=False)
+        quiet_m = check_real("quiet_m", quiet_m, low=0.0, low_inclusive=False)
         span = math.log(max_threshold / min_threshold)
 
         def action(threshold: float) -> np.ndarray:
@@ -77,7 +85,10 @@ class SurpriseWindowPolicy:
         windows: tuple[int, ...] = DEFAULT_WINDOWS,
         sensing_range: float = 50.0,
     ) -> None:
-        self.quiet, self.surprised = windows.index(quiet), windows.index(surprised)
+        windows = tuple(windows)
+        self.quiet = windows.index(check_choice("quiet", quiet, windows))
+        self.surprised = windows.index(check_choice("surprised", surprised, windows))
+        surprise_m = check_real("surprise_m", surprise_m, low=0.0, low_inclusive=False)
         self.surprise_m, self.sensing_range = float(surprise_m), float(sensing_range)
 
     def predict(self, observation):

@@ -97,3 +97,34 @@ def test_among_ties_the_greedy_policy_keeps_the_preferred_setting():
     np.testing.assert_array_equal(GreedyClairvoyantPolicy(env).predict(observation), candidates[0])
     with pytest.raises(ValueError, match="prefer must be one of"):
         GreedyClairvoyantPolicy(env, prefer=np.array([0.3], dtype=np.float32))
+
+
+class _TableEnv(gym.Env):
+    """A one-step stand-in whose reward for action a is ``rewards[a]``."""
+
+    def __init__(self, rewards):
+        self.rewards = rewards
+
+    def step(self, action):
+        return None, self.rewards[action], False, False, {}
+
+
+@pytest.mark.parametrize(
+    "rewards, prefer, expected",
+    [
+        ([1.0, 1.0, 0.0, 0.0, 0.0], 3, 1),  # tied at 0 and 1: the nearer to 3
+        ([0.0, 1.0, 0.0, 1.0, 0.0], 4, 3),
+        ([0.0, 1.0, 0.0, 1.0, 0.0], 2, 1),  # equally near: the first
+        ([0.0, 1.0, 2.0, 0.0, 0.0], 4, 2),  # no tie: the best
+        ([1.0, 1.0, 0.0, 0.0, 0.0], None, 0),
+    ],
+)
+def test_among_tied_candidates_the_one_nearest_the_preferred_is_taken(rewards, prefer, expected):
+    policy = GreedyClairvoyantPolicy(_TableEnv(rewards), actions=range(5), prefer=prefer)
+    assert policy.predict(None) == expected
+
+
+def test_the_greedy_policy_refuses_a_rendering_env():
+    env = gym.make("DGPTrackGating-v0", render_mode="rgb_array")
+    with pytest.raises(ValueError, match="must not render"):
+        GreedyClairvoyantPolicy(env)

@@ -17,11 +17,12 @@ from agents.rl.tuning_rules import (
 INDEX = {name: i for i, name in enumerate(FEATURE_NAMES)}
 
 
-def observation(experts=3, innovation_m=1.0, silent_steps=0):
+def observation(experts=3, innovation_m=1.0, silent_steps=0, gated_out=0):
     vector = np.zeros(len(FEATURE_NAMES), dtype=np.float32)
     vector[INDEX["n_experts"]] = experts / 10
     vector[INDEX["innovation"]] = innovation_m / 50.0
     vector[INDEX["silent_steps"]] = silent_steps / 10
+    vector[INDEX["gated_out"]] = np.log1p(gated_out) / 4
     return vector
 
 
@@ -32,6 +33,8 @@ def observation(experts=3, innovation_m=1.0, silent_steps=0):
         (dict(innovation_m=2.1), False),  # surprised
         (dict(innovation_m=0.5, silent_steps=1), False),  # the last step had no data
         (dict(experts=0, innovation_m=0.0), False),  # no model yet
+        # the gate dropped every measurement: no summary, so no innovation; not quiet
+        (dict(innovation_m=0.0, gated_out=6), False),
     ],
 )
 def test_the_quiet_track_gate_is_tight_only_while_the_track_is_quiet(situation, tight):
@@ -62,3 +65,19 @@ def test_every_grid_setting_makes_a_rule_that_acts_in_its_environment():
             for setting in grid:
                 action = TUNING_RULES[kind](**setting).predict(observation())
                 assert env.action_space.contains(action), (env_id, setting, action)
+
+
+@pytest.mark.parametrize(
+    "rule, setting, message",
+    [
+        (QuietTrackGatePolicy, dict(tight=0.0, quiet_m=2.0, loose=30.0), "tight must be in"),
+        (QuietTrackGatePolicy, dict(tight=8.0, quiet_m=2.0, loose=5.0), "tight must be in"),
+        (QuietTrackGatePolicy, dict(tight=2.0, quiet_m=2.0, loose=40.0), "loose must be in"),
+        (QuietTrackGatePolicy, dict(tight=2.0, quiet_m=0.0, loose=30.0), "quiet_m must be in"),
+        (SurpriseWindowPolicy, dict(quiet=7, surprised=3, surprise_m=5.0), "quiet must be one"),
+        (SurpriseWindowPolicy, dict(quiet=3, surprised=3, surprise_m=-1.0), "surprise_m must"),
+    ],
+)
+def test_rule_arguments_are_validated(rule, setting, message):
+    with pytest.raises(ValueError, match=message):
+        rule(**setting)
