@@ -41,8 +41,9 @@ def _quiet(observation, quiet_m: float, sensing_range: float) -> bool:
 
 class QuietTrackGatePolicy:
     """``DGPTrackGating-v0``: the gate threshold ``tight`` while the track is quiet (the last
-    step's summaries lay within ``quiet_m`` metres of their predictions on average, and it
-    had measurements), else ``loose``. Thresholds are Mahalanobis distances, mapped to the
+    step had gated summaries and they lay within ``quiet_m`` metres of their predictions on
+    average), else ``loose``: after a silent step, and after a step whose measurements the
+    gate dropped entirely. Thresholds are Mahalanobis distances, mapped to the
     action as the environment maps it back (its default range 1-30)."""
 
     def __init__(
@@ -74,8 +75,8 @@ class QuietTrackGatePolicy:
 
 class SurpriseWindowPolicy:
     """``DGPTrackWindow-v0``: the window ``surprised`` after a step whose summaries lay more
-    than ``surprise_m`` metres from their predictions on average (or without measurements),
-    else ``quiet``; windows are lengths C of ``windows``."""
+    than ``surprise_m`` metres from their predictions on average (or without gated
+    summaries), else ``quiet``; windows are lengths C of ``windows``."""
 
     def __init__(
         self,
