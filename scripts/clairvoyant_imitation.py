@@ -47,12 +47,8 @@ from sklearn.tree import DecisionTreeRegressor  # noqa: E402
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
 from agents.rl.cli import TUNING_ENV_IDS, TUNING_TASK_KWARGS, parse_kwargs  # noqa: E402
-from agents.rl.evaluation import (  # noqa: E402
-    ConstantPolicy,
-    paired_interval,
-    run_policy_episode,
-)
-from agents.rl.runs import best_fixed_setting, cached_json  # noqa: E402
+from agents.rl.evaluation import paired_interval  # noqa: E402
+from agents.rl.runs import best_fixed_setting, cached_json, run_policies  # noqa: E402
 
 LEAF_SIZES = (50, 200, 800)
 """Minimum samples per leaf tried for the tree (about 150 steps per seed)."""
@@ -70,6 +66,11 @@ class AdvantagePolicy:
         advantage = self.tree.predict(np.asarray(observation, dtype=float)[None])[0]
         best = int(np.argmax(advantage))
         return self.actions[best if advantage[best] > 0 else self.fallback]
+
+
+TREE_POLICY = {"tree": AdvantagePolicy}
+""":func:`agents.rl.runs.run_policies`' rule of kind ``"tree"``: an :class:`AdvantagePolicy`
+from its keyword arguments."""
 
 
 def best_fixed_records(task) -> dict[str, list]:
@@ -94,12 +95,6 @@ def cached_records(task_and_cache) -> dict[str, list]:
     key = json.dumps([dgpt_gym.__version__, *task], sort_keys=True, default=str)
     path = cache / f"records-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
     return cached_json(path, lambda: best_fixed_records(task))
-
-
-def returns_of(task) -> list[float]:
-    env_id, env_kwargs, policy, seeds = task
-    env = gym.make(env_id, **env_kwargs)
-    return [run_policy_episode(env, policy, seed)["return"] for seed in seeds]
 
 
 def main(argv=None) -> int:
@@ -151,36 +146,51 @@ def main(argv=None) -> int:
     with ProcessPoolExecutor(args.workers) as pool:
         tasks = [((args.env, env_kwargs, best, seed), args.cache) for seed in fit]
         records = list(pool.map(cached_records, tasks))
-        x = np.concatenate([np.array(r["observations"]) for r in records])
-        y = np.concatenate([np.array(r["advantages"]) for r in records])
+    x = np.concatenate([np.array(r["observations"]) for r in records])
+    y = np.concatenate([np.array(r["advantages"]) for r in records])
+    report.append(
+        f"{len(x)} steps on fit seeds {fit[0]}-{fit[-1]}; one-step advantage over "
+        f"{best_name}, mean of the best per step {y.max(axis=1).mean():.4f}"
+    )
+    print(report[-1])
+
+    def returns(leaves, seeds) -> np.ndarray:
+        """(1 + len(leaves), len(seeds)) returns: the best fixed setting's (cached) and
+        the learned policy's for each minimum leaf size (not cached: a fitted tree is not
+        named by its arguments)."""
+        trees = [
+            (
+                "tree",
+                {
+                    "tree": DecisionTreeRegressor(min_samples_leaf=leaf, random_state=0).fit(x, y),
+                    "actions": actions,
+                    "fallback": best,
+                },
+            )
+            for leaf in leaves
+        ]
+        rows = run_policies(
+            [("constant", actions[best])],
+            args.env,
+            env_kwargs,
+            seeds,
+            args.workers,
+            cache=args.cache,
+        )
+        rows += run_policies(trees, args.env, env_kwargs, seeds, args.workers, TREE_POLICY)
+        return np.array([[row["return"] for row in policy_rows] for policy_rows in rows])
+
+    fixed_and_learned = returns(LEAF_SIZES, select)
+    scores = {}
+    for leaf, learned in zip(LEAF_SIZES, fixed_and_learned[1:]):
+        scores[leaf] = float(np.mean(learned - fixed_and_learned[0]))
         report.append(
-            f"{len(x)} steps on fit seeds {fit[0]}-{fit[-1]}; one-step advantage over "
-            f"{best_name}, mean of the best per step {y.max(axis=1).mean():.4f}"
+            f"selection seeds {select[0]}-{select[-1]}: min leaf {leaf}, "
+            f"mean return - {best_name} {scores[leaf]:+.3f}"
         )
         print(report[-1])
-
-        def policy(leaf):
-            tree = DecisionTreeRegressor(min_samples_leaf=leaf, random_state=0).fit(x, y)
-            return AdvantagePolicy(tree, actions, best)
-
-        def returns(policy_, seeds):
-            chunks = [list(seeds)[i :: args.workers] for i in range(args.workers)]
-            parts = pool.map(returns_of, [(args.env, env_kwargs, policy_, c) for c in chunks])
-            by_seed = dict(zip((s for c in chunks for s in c), (r for p in parts for r in p)))
-            return np.array([by_seed[s] for s in seeds])
-
-        fixed_select = returns(ConstantPolicy(actions[best]), select)
-        scores = {}
-        for leaf in LEAF_SIZES:
-            scores[leaf] = float(np.mean(returns(policy(leaf), select) - fixed_select))
-            report.append(
-                f"selection seeds {select[0]}-{select[-1]}: min leaf {leaf}, "
-                f"mean return - {best_name} {scores[leaf]:+.3f}"
-            )
-            print(report[-1])
-        leaf = max(scores, key=scores.get)
-        learned = returns(policy(leaf), evaluation)
-        fixed = returns(ConstantPolicy(actions[best]), evaluation)
+    leaf = max(scores, key=scores.get)
+    fixed, learned = returns([leaf], evaluation)
     difference, half = paired_interval(learned - fixed)
     report.append(
         f"evaluation seeds 0-{args.seeds - 1}, min leaf {leaf}: learned one-step "

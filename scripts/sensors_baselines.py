@@ -57,7 +57,7 @@ from agents.rl.heuristics import (  # noqa: E402
     UncertaintyRadiusPolicy,
 )
 from agents.rl.registration import ENVIRONMENTS  # noqa: E402
-from agents.rl.runs import check_agent_folders, run_policies  # noqa: E402
+from agents.rl.runs import check_agent_folders, run_policies, tune_rules  # noqa: E402
 
 ENV_IDS = tuple(
     environment.id
@@ -142,14 +142,11 @@ def main(argv=None) -> int:
 
     # 1. the rules' settings on training seeds
     training = list(range(1000, 1000 + args.training_seeds))
-    tuning = [(kind, setting) for kind, grid in HEURISTIC_GRIDS.items() for setting in grid]
-    results = run_policies(tuning, args.env, env_kwargs, training, args.workers, RULES, args.cache)
-    best = {}
-    for (kind, setting), rows in zip(tuning, results):
-        score = float(np.mean([row["return"] for row in rows]))
+    best, tuning = tune_rules(
+        HEURISTIC_GRIDS, args.env, env_kwargs, training, args.workers, RULES, args.cache
+    )
+    for kind, setting, score in tuning:
         print(f"training  {kind:20s} {setting}: mean return {score:.2f}")
-        if kind not in best or score > best[kind][1]:
-            best[kind] = (setting, score)
     training_score = {}
 
     # 2. every policy on the evaluation seeds

@@ -58,7 +58,12 @@ from agents.rl.evaluation import (  # noqa: E402
     iqm_interval,
     policy_cells,
 )
-from agents.rl.runs import best_fixed_setting, check_agent_folders, run_policies  # noqa: E402
+from agents.rl.runs import (  # noqa: E402
+    best_fixed_setting,
+    check_agent_folders,
+    run_policies,
+    tune_rules,
+)
 from agents.rl.tuning_rules import TUNING_RULE_GRIDS, TUNING_RULES  # noqa: E402
 
 KNOB_LABELS = {"window": "mean window C", "gate_threshold": "mean gate threshold"}
@@ -123,17 +128,17 @@ def main(argv=None) -> int:
         print(f"training  {name:28s} mean return {score:9.2f}")
 
     # the task's adaptive rule, tuned on the same training seeds
-    grids = TUNING_RULE_GRIDS.get(args.env, {})
-    tuning = [(kind, setting) for kind, grid in grids.items() for setting in grid]
-    tuned = {}
-    rows_by_setting = run_policies(
-        tuning, args.env, env_kwargs, training, args.workers, TUNING_RULES, args.cache
+    tuned, tuning = tune_rules(
+        TUNING_RULE_GRIDS.get(args.env, {}),
+        args.env,
+        env_kwargs,
+        training,
+        args.workers,
+        TUNING_RULES,
+        args.cache,
     )
-    for (kind, setting), rows in zip(tuning, rows_by_setting):
-        score = float(np.mean([row["return"] for row in rows]))
+    for kind, setting, score in tuning:
         print(f"training  {kind} {setting}: mean return {score:9.2f}")
-        if kind not in tuned or score > tuned[kind][1]:
-            tuned[kind] = (setting, score)
 
     # 2. every policy on the evaluation seeds
     policies = {name: ("constant", action) for name, action in constants.items()}

@@ -26,6 +26,7 @@ __all__ = [
     "check_agent_folders",
     "run_policies",
     "best_fixed_setting",
+    "tune_rules",
     "cached_json",
 ]
 
@@ -186,3 +187,27 @@ def best_fixed_setting(
         for name, rows in zip(settings, results)
     }
     return max(scores, key=scores.get), scores
+
+
+def tune_rules(
+    grids: dict[str, list[dict]],
+    env_id: str,
+    env_kwargs: dict,
+    seeds: Iterable[int],
+    workers: int | None = None,
+    rules: dict | None = None,
+    cache: str | Path | None = None,
+) -> tuple[dict[str, tuple[dict, float]], list[tuple[str, dict, float]]]:
+    """Each rule's setting with the best mean return on ``seeds`` (give training seeds):
+    ``{kind: (setting, mean return)}`` over ``grids`` (``{kind: [setting, ...]}``, the
+    ``rules``' keyword arguments), and every ``(kind, setting, mean return)`` in grid order,
+    by :func:`run_policies`."""
+    tuning = [(kind, setting) for kind, grid in grids.items() for setting in grid]
+    results = run_policies(tuning, env_id, env_kwargs, seeds, workers, rules, cache)
+    best, scores = {}, []
+    for (kind, setting), rows in zip(tuning, results):
+        score = float(np.mean([row["return"] for row in rows]))
+        scores.append((kind, setting, score))
+        if kind not in best or score > best[kind][1]:
+            best[kind] = (setting, score)
+    return best, scores

@@ -81,3 +81,26 @@ def test_every_grid_setting_makes_a_rule_that_acts_in_its_environment():
 def test_rule_arguments_are_validated(rule, setting, message):
     with pytest.raises(ValueError, match=message):
         rule(**setting)
+
+
+def test_the_rules_read_the_innovation_in_metres_as_the_environment_writes_it():
+    """The rules' decoding against the tracker itself: after each step the observation's
+    innovation, read by the rules, is the mean distance (m) of the gated summaries from
+    their predictions, and a step without summaries is never quiet."""
+    from agents.rl.tuning_rules import _quiet, _surprise_m
+
+    env = gym.make("DGPTrackGating-v0", scenario="S1", clutter_rate=5.0)
+    observation, _ = env.reset(seed=1000)
+    checked = 0
+    for _ in range(60):
+        observation, *_ = env.step(np.array([1.0], dtype=np.float32))
+        tracker = env.unwrapped.tracker
+        innovation = tracker.last_innovation_
+        expected = float(np.mean(np.hypot(*innovation.T))) if innovation.size else 0.0
+        assert _surprise_m(observation, env.unwrapped.inner.sensing_range) == pytest.approx(
+            expected, rel=1e-5, abs=1e-4
+        )
+        if not innovation.size:
+            assert not _quiet(observation, 1e9, env.unwrapped.inner.sensing_range)
+        checked += innovation.size > 0
+    assert checked > 10
