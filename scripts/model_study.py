@@ -275,9 +275,23 @@ CANDIDATES = {
                 "silence_particles": 1000,
                 "gap_end": "reports",
                 "gap_restart_probability": probability,
+                "gap_end_evidence": "summaries",
             },
         )
         for probability in (0.0, 0.02, 0.1, 0.3, 0.6)
+    },
+    **{
+        f"ss-rbcm-silence-1000-reports-{probability:g}-scans": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "gap_end": "reports",
+                "gap_restart_probability": probability,
+                "gap_end_evidence": "scans",
+            },
+        )
+        for probability in (0.02, 0.1, 0.3)
     },
     **{
         f"ss-rbcm-silence-1000-search-{settle:g}-{birth:g}": (
@@ -375,7 +389,9 @@ particles: it is ``dgpt-rbcm`` since 0.12.0; ``-moments`` is 0.12.0-0.14.0's ``d
 whose prior after a gap is the particles' moments predicted, and ``-reports-<p>`` conditions
 that prior on which sensors report, with a new track of prior probability p
 (:data:`~agents.state_space_dgpt.GAP_ENDS`; ``hybrid-ncv-silence-1000-*`` the same inside
-the hybrid). Results
+the hybrid), its hypotheses weighed by their summaries as up to 0.20.0; ``-reports-<p>-scans``
+weighs them by the scans' evidence (:data:`~agents.state_space_dgpt.GAP_END_EVIDENCE`;
+``-reports-0.1-scans`` is ``dgpt-rbcm`` since 0.21.0). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (

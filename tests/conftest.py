@@ -1,5 +1,7 @@
 """Shared fixtures and helpers."""
 
+import itertools
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -109,3 +111,39 @@ def short_ppo(tmp_path):
         )
 
     return train
+
+
+def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None):
+    """The exact posterior by enumeration: every subset S of target points (with sensors,
+    only the subsets with a point of every sensor), weight c^(n - |S|) lambda_T^|S| times
+    the prior predictive density of z_S, its component the Kalman update with z_S; returns
+    (mean, var, log evidence)."""
+    c = model.clutter_rate / model.sensing_area
+    noise = model.noise_std**2
+    log_weights, means, variances = [], [], []
+    for assignment in itertools.product([False, True], repeat=points.shape[0]):
+        chosen = np.array(assignment, dtype=bool)
+        if sensors is not None and not set(sensors) <= set(sensors[chosen]):
+            continue
+        n_clutter = points.shape[0] - chosen.sum()
+        if n_clutter and c == 0:
+            continue
+        log_weight = n_clutter * np.log(c) if n_clutter else 0.0
+        mean, var = prior_mean.copy(), prior_var.copy()
+        for z in points[chosen]:  # sequential Kalman updates: the predictive chain rule
+            predictive = var + noise
+            log_weight += np.log(model.detection_rate) - 0.5 * np.sum(
+                (z - mean) ** 2 / predictive + np.log(2 * np.pi * predictive)
+            )
+            gain = var / predictive
+            mean, var = mean + gain * (z - mean), (1 - gain) * var
+        log_weights.append(log_weight)
+        means.append(mean)
+        variances.append(var)
+    log_weights = np.array(log_weights)
+    weights = np.exp(log_weights - log_weights.max())
+    total = weights.sum()
+    weights /= total
+    means, variances = np.array(means), np.array(variances)
+    mean = weights @ means
+    return mean, weights @ (variances + (means - mean) ** 2), log_weights.max() + np.log(total)

@@ -1,23 +1,26 @@
 """The Poisson likelihood, the hybrid Bayesian filter and the multiple-model CPF."""
 
-import itertools
-
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import median_in_band, mixture_moments, problem_spec, sensed_calibration
+from conftest import (
+    brute_force_posterior,
+    median_in_band,
+    mixture_moments,
+    problem_spec,
+    sensed_calibration,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.hybrid import (
+from agents.hybrid import HybridFilter, paper_posterior
+from agents.likelihood import PoissonLikelihood
+from agents.poisson_update import (
     GaussianSumPosterior,
-    HybridFilter,
     exact_posterior,
     gaussian_sums,
     mixture_posterior,
-    paper_posterior,
 )
-from agents.likelihood import PoissonLikelihood
 from agents.state_space import condition_on_position, ncv_predict, turn_predict
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
 from dgpt_gym import make_tracker
@@ -251,42 +254,6 @@ def test_gaussian_sums_of_many_priors_equal_each_prior_alone(
             batch.pruned_mass[prior], alone.pruned_mass, rtol=1e-9, atol=1e-300
         )
         assert batch.n_components[prior] == alone.n_components
-
-
-def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None):
-    """The exact posterior by enumeration: every subset S of target points (with sensors,
-    only the subsets with a point of every sensor), weight c^(n - |S|) lambda_T^|S| times
-    the prior predictive density of z_S, its component the Kalman update with z_S; returns
-    (mean, var, log evidence)."""
-    c = model.clutter_rate / model.sensing_area
-    noise = model.noise_std**2
-    log_weights, means, variances = [], [], []
-    for assignment in itertools.product([False, True], repeat=points.shape[0]):
-        chosen = np.array(assignment, dtype=bool)
-        if sensors is not None and not set(sensors) <= set(sensors[chosen]):
-            continue
-        n_clutter = points.shape[0] - chosen.sum()
-        if n_clutter and c == 0:
-            continue
-        log_weight = n_clutter * np.log(c) if n_clutter else 0.0
-        mean, var = prior_mean.copy(), prior_var.copy()
-        for z in points[chosen]:  # sequential Kalman updates: the predictive chain rule
-            predictive = var + noise
-            log_weight += np.log(model.detection_rate) - 0.5 * np.sum(
-                (z - mean) ** 2 / predictive + np.log(2 * np.pi * predictive)
-            )
-            gain = var / predictive
-            mean, var = mean + gain * (z - mean), (1 - gain) * var
-        log_weights.append(log_weight)
-        means.append(mean)
-        variances.append(var)
-    log_weights = np.array(log_weights)
-    weights = np.exp(log_weights - log_weights.max())
-    total = weights.sum()
-    weights /= total
-    means, variances = np.array(means), np.array(variances)
-    mean = weights @ means
-    return mean, weights @ (variances + (means - mean) ** 2), log_weights.max() + np.log(total)
 
 
 @given(

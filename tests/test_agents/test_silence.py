@@ -4,11 +4,12 @@ that uses it (StateSpaceDGPT(silence_particles=N), every registered ``dgpt-*`` a
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import measurement_obs, problem_spec
+from conftest import brute_force_posterior, measurement_obs, problem_spec
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import dgpt_gym  # noqa: F401  (registers the environment)
+from agents.likelihood import PoissonLikelihood
 from agents.particles import kernel_scale, resample_systematic
 from agents.registration import SILENCE_PARTICLES
 from agents.silence import (
@@ -206,6 +207,70 @@ def test_at_a_gaps_end_no_particle_where_the_reports_say_starts_a_new_track():
     np.testing.assert_array_less(
         np.abs(means[0, :, 0] - spec.sensor_positions[2]), 5 * 50.0 / (2 * np.sqrt(1000))
     )
+
+
+class HypothesisRecordingDGPT(StateSpaceDGPT):
+    """Keeps the last step's hypothesis log weights (before normalisation)."""
+
+    def _mode_posteriors(self, modes, log_weights, means, covs):
+        self.hypothesis_log_weights_ = log_weights
+        return super()._mode_posteriors(modes, log_weights, means, covs)
+
+
+def a_turn_in_a_gap(gap_end_evidence):
+    """The track of :func:`gap_end_predictions`, a gap, then sensor 1 reports three points
+    at clutter rate 5: one 2 m from the particles' NCV prediction, about (583, 554) m with a
+    standard deviation of 4-5 m (clutter), and two 1 m apart at (580, 625) m, 70 m north
+    (the target, which turned in the gap). Returns the tracker, its estimate and the
+    points."""
+    spec = problem_spec(
+        sensor_positions=((500.0, 500.0), (575.0, 590.0), (200.0, 200.0)),
+        n_steps=20,
+        clutter_rate=5.0,
+    )
+    tracker = HypothesisRecordingDGPT(
+        aggregation="rbcm", silence_particles=1000, gap_end_evidence=gap_end_evidence
+    )
+    tracker.reset(spec, seed=5)
+    for t in range(5):
+        tracker.update(measurement_obs(t, [[505.0 + 10.0 * t, 500.0]], [0]))
+    for t in (5, 6):
+        tracker.update(measurement_obs(t, np.empty((0, 2)), []))
+    points = np.array([[583.0, 556.0], [580.0, 625.0], [580.8, 624.4]])
+    estimate = tracker.update(measurement_obs(7, points, [1, 1, 1]))
+    return tracker, estimate, points
+
+
+def test_at_a_gaps_end_the_scans_evidence_weighs_the_hypotheses():
+    """With gap_end_evidence="scans" each hypothesis's weight is its prior probability times
+    its evidence, the integral of its Gaussian position prediction against the likelihood of
+    the scan, here computed by enumerating every assignment of the points to target and
+    clutter with a target point from the reporting sensor (the environment's model); 1e-9
+    of relative error is the Gaussian sums' pruning tolerance. Two agreeing points far from
+    the particles give the new track a sixth of the weight, where the summaries leave it
+    0.2 %: the estimate's 3-sigma interval then holds the target's points, where the
+    summaries' estimate stays on the clutter point with a 3 m standard deviation."""
+    tracker, estimate, points = a_turn_in_a_gap("scans")
+    log_priors, means, covs, _ = tracker.step_predictions_
+    likelihood = PoissonLikelihood.from_spec(tracker.spec_)
+    evidence = [
+        brute_force_posterior(mean[:, 0], cov[:, 0, 0], points, likelihood, np.ones(3, int))[2]
+        for mean, cov in zip(means, covs)
+    ]
+    expected = log_priors + evidence
+    recorded = tracker.hypothesis_log_weights_
+    np.testing.assert_allclose(
+        np.exp(recorded - np.logaddexp.reduce(recorded)),
+        np.exp(expected - np.logaddexp.reduce(expected)),
+        rtol=1e-6,
+        atol=1e-12,
+    )
+    target = points[1:].mean(axis=0)
+    assert np.all(np.abs(estimate.mean - target) <= 3.0 * np.sqrt(estimate.var))
+    tracker, estimate, _ = a_turn_in_a_gap("summaries")
+    recorded = tracker.hypothesis_log_weights_
+    assert np.exp(recorded[-1] - np.logaddexp.reduce(recorded)) < 0.01
+    assert np.abs(estimate.mean[1] - target[1]) > 10.0 * np.sqrt(estimate.var[1])
 
 
 @pytest.mark.parametrize("neighbour_awake", [True, False])
