@@ -245,8 +245,9 @@ def test_at_a_gaps_end_the_scans_evidence_weighs_the_hypotheses():
     """With gap_end_evidence="scans" each hypothesis's weight is its prior probability times
     its evidence, the integral of its Gaussian position prediction against the likelihood of
     the scan, here computed by enumerating every assignment of the points to target and
-    clutter with a target point from the reporting sensor (the environment's model); 1e-9
-    of relative error is the Gaussian sums' pruning tolerance. Two agreeing points far from
+    clutter with a target point from the reporting sensor (the environment's model), to a
+    relative 1e-6 (the Gaussian sums prune components below 1e-9 of their prior's weight,
+    and only a handful exist here). Two agreeing points far from
     the particles give the new track a sixth of the weight, where the summaries leave it
     0.2 %: the estimate's 3-sigma interval then holds the target's points, where the
     summaries' estimate stays on the clutter point with a 3 m standard deviation."""
