@@ -28,8 +28,9 @@ Two updates, per step:
   (:func:`~agents.poisson_update.mixture_posterior`,
   :data:`PRIOR_MODELS`); in a coverage gap that the DGPT's silence particles carry, the
   estimate is the DGPT's, and at the gap's end the mixture prior is the DGPT's predictions
-  there: its particles where the reports put the target, and a new track
-  (:data:`agents.state_space_dgpt.GAP_ENDS`; ``prior_model="moments"`` takes the
+  there: its particles where the reports put the target, and a new track over the
+  region's cells (:data:`agents.state_space_dgpt.GAP_ENDS`,
+  :data:`~agents.state_space_dgpt.GAP_REGION_CELL`; ``prior_model="moments"`` takes the
   prediction made at the gap's last step).
 """
 

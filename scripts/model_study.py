@@ -68,6 +68,8 @@ CANDIDATES = {
                 "silence_particles": 1000,
                 "gap_end": "reports",
                 "gap_restart_probability": probability,
+                "gap_end_evidence": "summaries",
+                "gap_region_cell": 0.0,
             },
         )
         for probability in (0.02, 0.1)
@@ -276,6 +278,7 @@ CANDIDATES = {
                 "gap_end": "reports",
                 "gap_restart_probability": probability,
                 "gap_end_evidence": "summaries",
+                "gap_region_cell": 0.0,
             },
         )
         for probability in (0.0, 0.02, 0.1, 0.3, 0.6)
@@ -289,9 +292,25 @@ CANDIDATES = {
                 "gap_end": "reports",
                 "gap_restart_probability": probability,
                 "gap_end_evidence": "scans",
+                "gap_region_cell": 0.0,
             },
         )
         for probability in (0.02, 0.1, 0.3)
+    },
+    **{
+        f"ss-rbcm-silence-1000-reports-{probability:g}-scans-cells-{cell:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {
+                "aggregation": "rbcm",
+                "silence_particles": 1000,
+                "gap_end": "reports",
+                "gap_restart_probability": probability,
+                "gap_end_evidence": "scans",
+                "gap_region_cell": cell,
+            },
+        )
+        for probability in (0.03, 0.1, 0.3)
+        for cell in (5.0, 10.0, 20.0)
     },
     **{
         f"ss-rbcm-silence-1000-search-{settle:g}-{birth:g}": (

@@ -21,7 +21,9 @@ from agents.poisson_update import (
     gaussian_sums,
     mixture_posterior,
 )
+from agents.silence import region_cells
 from agents.state_space import condition_on_position, ncv_predict, turn_predict
+from agents.state_space_dgpt import GAP_REGION_CELL
 from baselines.cpf import MODE_TRANSITION, MultipleModelCPF, turn_transition
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.episodes import run_episode
@@ -513,7 +515,7 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
     particles are gone. With gap_end="moments" those predictions are the one the particles'
     moments made at the gap's last step; with "reports" (the default) they are the particles
     carried to the step, each mode's in the disc of every reporting sensor, and the new
-    track in that region with its prior probability."""
+    track over that region's cells, each with its share of the prior probability 0.1."""
     hybrid, dgpt = make_tracker("hybrid"), make_tracker("dgpt-rbcm")
     assert hybrid.dgpt.silence_particles == dgpt.silence_particles > 0
     assert hybrid.dgpt.aggregation == dgpt.aggregation
@@ -545,12 +547,30 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
                 # components and modes: the same mean
                 np.testing.assert_allclose(weights @ means[:, :, 0], prediction[0], rtol=1e-9)
             else:
-                reporting = np.asarray(spec.sensor_positions)[
-                    np.unique(obs["sensor"][obs["mask"] > 0])
-                ]
-                distances = np.linalg.norm(means[:, None, :, 0] - reporting[None], axis=-1)
+                positions = np.asarray(spec.sensor_positions)
+                reports = np.zeros(len(positions), dtype=bool)
+                reports[np.unique(obs["sensor"][obs["mask"] > 0])] = True
+                distances = np.linalg.norm(means[:, None, :, 0] - positions[reports][None], axis=-1)
                 assert np.all(distances <= spec.sensing_range)  # the discs' intersection is convex
-                assert weights[-1] == pytest.approx(0.1, rel=1e-12)
+                # the new track: the region's cells near the points, each with 0.1 x its share
+                shares, cell_means, _ = region_cells(
+                    positions[reports],
+                    positions[~reports],
+                    spec.sensing_range,
+                    spec.area,
+                    GAP_REGION_CELL,
+                )
+                new_track = np.all(means[:, :, 1] == 0.0, axis=1)
+                matches = np.all(
+                    np.isclose(means[new_track, None, :, 0], cell_means[None]), axis=-1
+                )
+                assert new_track.sum() >= 1 and np.all(matches.sum(axis=1) == 1)
+                cell_shares = shares[np.argmax(matches, axis=1)]
+                # with no particle in the region, the new track in every mode, evenly
+                scale = 0.1 if not new_track.all() else 1.0 / len(tracker.dgpt.mode_transition)
+                np.testing.assert_allclose(
+                    np.exp(log_priors[new_track]), scale * cell_shares, rtol=1e-12
+                )
             expected = predictions_posterior(tracker.dgpt, obs, likelihood)
             np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
             reacquisitions += 1

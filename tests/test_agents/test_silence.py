@@ -7,6 +7,7 @@ import pytest
 from conftest import brute_force_posterior, measurement_obs, problem_spec
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import stats
 
 import dgpt_gym  # noqa: F401  (registers the environment)
 from agents.likelihood import PoissonLikelihood
@@ -16,11 +17,17 @@ from agents.silence import (
     draw_particles,
     particle_moments,
     propagate_particles,
+    region_cells,
     reporting_region,
     silent_region,
 )
 from agents.state_space import ncv_predict, turn_predict
-from agents.state_space_dgpt import GAP_RESTART_PROBABILITY, INITIAL_SPEED_STD, StateSpaceDGPT
+from agents.state_space_dgpt import (
+    GAP_REGION_CELL,
+    GAP_RESTART_PROBABILITY,
+    INITIAL_SPEED_STD,
+    StateSpaceDGPT,
+)
 from dgpt_gym.benchmark.episodes import run_episode, run_episodes
 
 
@@ -153,15 +160,18 @@ def test_reporting_region_by_hand():
     )
 
 
-def gap_end_predictions(reporting_sensor, point, gap_end="reports"):
+def gap_end_predictions(reporting_sensor, point, gap_end="reports", gap_region_cell=0.0):
     """A target reported by sensor 0 at (500, 500) while it moves east at 10 m/s (steps
     0-4), silent at steps 5-6, then reported at ``point`` by ``reporting_sensor``: sensor 1
     at (575, 590), north of the particles' path and out of sensor 0's disc, or sensor 2 at
-    (200, 200), which no particle can reach. Returns the spec and the step's predictions."""
+    (200, 200), which no particle can reach. The new track is one Gaussian unless
+    ``gap_region_cell`` > 0. Returns the spec and the step's predictions."""
     spec = problem_spec(
         sensor_positions=((500.0, 500.0), (575.0, 590.0), (200.0, 200.0)), n_steps=20
     )
-    tracker = StateSpaceDGPT(silence_particles=1000, gap_end=gap_end)
+    tracker = StateSpaceDGPT(
+        silence_particles=1000, gap_end=gap_end, gap_region_cell=gap_region_cell
+    )
     tracker.reset(spec, seed=5)
     for t in range(5):
         tracker.update(measurement_obs(t, [[505.0 + 10.0 * t, 500.0]], [0]))
@@ -210,14 +220,16 @@ def test_at_a_gaps_end_no_particle_where_the_reports_say_starts_a_new_track():
 
 
 class HypothesisRecordingDGPT(StateSpaceDGPT):
-    """Keeps the last step's hypothesis log weights (before normalisation)."""
+    """Keeps the last step's hypothesis log weights (before normalisation) and posterior
+    positions (H, 2)."""
 
     def _mode_posteriors(self, modes, log_weights, means, covs):
         self.hypothesis_log_weights_ = log_weights
+        self.hypothesis_positions_ = means[..., 0].T
         return super()._mode_posteriors(modes, log_weights, means, covs)
 
 
-def a_turn_in_a_gap(gap_end_evidence):
+def a_turn_in_a_gap(gap_end_evidence, gap_region_cell=GAP_REGION_CELL):
     """The track of :func:`gap_end_predictions`, a gap, then sensor 1 reports three points
     at clutter rate 5: one 2 m from the particles' NCV prediction, about (583, 554) m with a
     standard deviation of 4-5 m (clutter), and two 1 m apart at (580, 625) m, 70 m north
@@ -229,7 +241,10 @@ def a_turn_in_a_gap(gap_end_evidence):
         clutter_rate=5.0,
     )
     tracker = HypothesisRecordingDGPT(
-        aggregation="rbcm", silence_particles=1000, gap_end_evidence=gap_end_evidence
+        aggregation="rbcm",
+        silence_particles=1000,
+        gap_end_evidence=gap_end_evidence,
+        gap_region_cell=gap_region_cell,
     )
     tracker.reset(spec, seed=5)
     for t in range(5):
@@ -268,10 +283,110 @@ def test_at_a_gaps_end_the_scans_evidence_weighs_the_hypotheses():
     )
     target = points[1:].mean(axis=0)
     assert np.all(np.abs(estimate.mean - target) <= 3.0 * np.sqrt(estimate.var))
-    tracker, estimate, _ = a_turn_in_a_gap("summaries")
+    tracker, estimate, _ = a_turn_in_a_gap("summaries", gap_region_cell=0.0)
     recorded = tracker.hypothesis_log_weights_
     assert np.exp(recorded[-1] - np.logaddexp.reduce(recorded)) < 0.01
     assert np.abs(estimate.mean[1] - target[1]) > 10.0 * np.sqrt(estimate.var[1])
+
+
+CRESCENT = {"reporting": np.array([[500.0, 500.0]]), "silent": np.array([[540.0, 500.0]])}
+"""Sensor 0's disc (R = 50 m) less that of the silent sensor 1, 40 m east: a crescent."""
+
+
+def uniform_crescent_density(points, noise_std, spacing=0.25):
+    """(1 / |R|) int_R N(z; x, noise_std^2 I) dx for each z of ``points``, the density of a
+    point of a target uniform in :data:`CRESCENT`, on a dense grid of ``spacing``."""
+    axis = np.arange(450.0 + spacing / 2, 550.0, spacing)
+    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    grid = grid[reporting_region(grid, CRESCENT["reporting"], CRESCENT["silent"], 50.0, 1e3)]
+    squared = np.sum((np.asarray(points)[:, None, :] - grid[None]) ** 2, axis=2)
+    kernel = np.exp(-0.5 * squared / noise_std**2) / (2 * np.pi * noise_std**2)
+    return kernel.sum(axis=1) / grid.shape[0]
+
+
+def test_region_cells_stand_for_the_uniform_density_of_a_crescent():
+    """The cells' mixture, convolved with the noise (sigma_n = 1 m), against the uniform
+    density over the crescent (a dense grid of 0.25 m). Inside, 15 m or more from both
+    edges, within 4 %: Gaussians of variance (s / 2)^2 + sigma_n^2 on a lattice of spacing
+    s = 10 m ripple by 2 exp(-2 pi^2 26 / 100) = 1.2 % per axis, 2.4 % over both, and the
+    cells' lattice of 2.5 m measures the area to about 1.5 %. At the crescent's tip,
+    4.7 m from the reporting disc's edge, the cells blur the edge over their standard
+    deviation: at least Phi(4.7 / sqrt(26)) of the density (0.82) less the 4 %. The
+    region's moments as one Gaussian, which this replaces, give the tip a quarter of its
+    density."""
+    weights, means, variances = region_cells(
+        CRESCENT["reporting"], CRESCENT["silent"], 50.0, 1e3, 10.0
+    )
+    assert weights.sum() == pytest.approx(1.0, rel=1e-12)
+    np.testing.assert_array_equal(variances, 25.0)
+    assert np.all(reporting_region(means, CRESCENT["reporting"], CRESCENT["silent"], 50.0, 1e3))
+    points = np.array([[470.0, 500.0], [468.0, 510.0], [468.0, 490.0], [495.0, 545.0]])
+    total = variances + 1.0
+    cells = np.sum(
+        weights
+        * np.exp(-0.5 * np.sum((points[:, None] - means) ** 2 / total, axis=2))
+        / (2 * np.pi * np.sqrt(np.prod(total, axis=1))),
+        axis=1,
+    )
+    uniform = uniform_crescent_density(points, 1.0)
+    np.testing.assert_allclose(cells[:3], uniform[:3], rtol=0.04)
+    blurred = stats.norm.cdf(4.7 / np.sqrt(26.0)) - 0.04
+    assert blurred <= cells[3] / uniform[3] <= 1.04
+    axis = np.arange(450.125, 550.0, 0.25)
+    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    grid = grid[reporting_region(grid, CRESCENT["reporting"], CRESCENT["silent"], 50.0, 1e3)]
+    moments = stats.multivariate_normal(grid.mean(axis=0), np.diag(grid.var(axis=0) + 1.0))
+    assert moments.pdf(points[3]) / uniform[3] < 0.3
+
+
+def test_region_cells_of_a_region_the_lattice_misses_are_empty():
+    """Two discs 100.5 m apart (R = 50 m) do not meet: no cell."""
+    weights, means, variances = region_cells(
+        np.array([[300.0, 300.0], [400.5, 300.0]]), np.empty((0, 2)), 50.0, 1e3, 10.0
+    )
+    assert weights.shape == (0,) and means.shape == (0, 2) and variances.shape == (0, 2)
+
+
+@pytest.mark.parametrize("gap_region_cell", [GAP_REGION_CELL, 0.0])
+def test_a_new_track_over_the_cells_weighs_a_point_at_the_regions_tip_as_uniform(
+    gap_region_cell,
+):
+    """A track far away, a gap, then the reporting sensor of :data:`CRESCENT` (the silent
+    one awake) reports three clutter points in the crescent's middle and the target's at
+    its tip (clutter rate 5); no particle reaches the region, so every hypothesis is the new
+    track. With a target uniform in the region, the tip point is the target's with
+    probability u(tip) / sum_j u(z_j), u the density of
+    :func:`uniform_crescent_density` (two target points 40 m apart have no weight): the
+    hypotheses whose posterior lies at the tip carry that share, within the cells' 15 %
+    at the tip and 4 % inside (test above). With one Gaussian (``gap_region_cell=0``) they
+    carry less than half of it, and the estimate's 3-sigma interval misses the tip."""
+    spec = problem_spec(
+        sensor_positions=((200.0, 200.0), (500.0, 500.0), (540.0, 500.0)),
+        n_steps=20,
+        clutter_rate=5.0,
+    )
+    tracker = HypothesisRecordingDGPT(
+        aggregation="rbcm", silence_particles=1000, gap_region_cell=gap_region_cell
+    )
+    tracker.reset(spec, seed=3)
+    for t in range(5):
+        tracker.update(measurement_obs(t, [[205.0 + 10.0 * t, 200.0]], [0]))
+    for t in (5, 6):
+        tracker.update(measurement_obs(t, np.empty((0, 2)), []))
+    points = np.array([[470.0, 500.0], [468.0, 510.0], [468.0, 490.0], [495.0, 545.0]])
+    estimate = tracker.update(measurement_obs(7, points, [1, 1, 1, 1]))
+    log_weights = tracker.hypothesis_log_weights_
+    weights = np.exp(log_weights - np.logaddexp.reduce(log_weights))
+    at_tip = np.linalg.norm(tracker.hypothesis_positions_ - points[3], axis=1) < 5.0
+    uniform = uniform_crescent_density(points, 1.0)
+    expected = uniform[3] / uniform.sum()
+    covered = np.all(np.abs(estimate.mean - points[3]) <= 3.0 * np.sqrt(estimate.var))
+    if gap_region_cell > 0:
+        assert weights[at_tip].sum() == pytest.approx(expected, rel=0.15)
+        assert covered
+    else:
+        assert weights[at_tip].sum() < 0.5 * expected
+        assert not covered
 
 
 @pytest.mark.parametrize("neighbour_awake", [True, False])
@@ -287,7 +402,7 @@ def test_a_new_tracks_region_leaves_out_awake_silent_discs_only(neighbour_awake)
         sensor_positions=((200.0, 200.0), (600.0, 600.0), (640.0, 600.0)), n_steps=20
     )
     awake = np.array([True, True, neighbour_awake])
-    tracker = StateSpaceDGPT(silence_particles=1000)
+    tracker = StateSpaceDGPT(silence_particles=1000, gap_region_cell=0.0)
     tracker.reset(spec, seed=2)
     for t in range(8):
         points, sensors = ([[205.0 + 10.0 * t, 200.0]], [0]) if t < 5 else ([], [])
