@@ -157,6 +157,7 @@ __all__ = [
     "GAP_END_EVIDENCE",
     "GAP_REGION_CELL",
     "GAP_REGION_COMPONENTS",
+    "kept_cells",
     "GAP_RESTART_PROBABILITY",
 ]
 
@@ -260,9 +261,9 @@ with clutter only where the target is sensed, an awake sensor reports exactly wh
 target is in its disc, so the target is in every reporting sensor's disc and in no silent
 one's (:func:`agents.silence.reporting_region`). Each mode's prediction is the moments of
 its particles there; with prior probability :data:`GAP_RESTART_PROBABILITY`, a new track
-is anywhere in that region (one prediction per cell since 0.22.0, :data:`GAP_REGION_CELL`),
-for a target that turned where the particles did not follow (and the only one when no
-particle is there).
+is anywhere in that region (since 0.22.0 one prediction per kept cell,
+:data:`GAP_REGION_CELL`), for a target that turned where the particles did not follow (and
+the only predictions, in every mode, when no particle is there).
 That share is a fixed prior, not the posterior given the reports, which would weigh the
 particles by their mass in the region: a robust prior against a gap model that misses
 turns, and chosen as such below.
@@ -336,16 +337,18 @@ GAP_REGION_CELL = 10.0
 (``StateSpaceDGPT(gap_region_cell=...)``; 0 gives one Gaussian, the region's moments, as up
 to 0.21.0). The target is anywhere in the region where exactly the reporting sensors see it:
 a uniform density, which the cells' Gaussians (:func:`agents.silence.region_cells`)
-represent and one Gaussian does not. The region is often a crescent, a disc less its silent
+represent and one Gaussian does not; the cells near the points become hypotheses
+(:data:`GAP_REGION_COMPONENTS`). The region is often a crescent, a disc less its silent
 neighbours' discs, whose moments put the mass at its middle, where it may not even be; a
 target that reappears at the region's edge then has its point weighed down against clutter
 near the middle by the Gaussian's tail. With the cells, every point in the region is as
-likely a priori, and the scans' evidence (:data:`GAP_END_EVIDENCE`, which the cells need)
-picks the cells near the points.
+likely a priori (to the cells' blur of its edges), and the scans' evidence
+(:data:`GAP_END_EVIDENCE`, which the cells need) picks the cells near the points.
 
 Why: on S1's reference path at clutter 5 the 3-sigma misses on detected steps were still
-the gap ends (training seeds 1000-1039, sigma_z 4: 7.3 % of their axes outside, against
-1.4 % of all detected steps). At S1's waypoint turn the particles' predictions lay 60 m
+the gap ends (training seeds 1000-1099, sigma_z 4, ``python scripts/calibration_misses.py
+--scenario S1 --clutter-rate 5 --noise-std 4``: 7.3 % of their axes outside, against 1.4 %
+of all detected steps). At S1's waypoint turn the particles' predictions lay 60 m
 off, the region's moments 2 sigma short of the target, and the target's one point lost to
 clutter nearer the middle.
 
@@ -355,22 +358,44 @@ ss-rbcm-silence-1000-reports-0.1-scans ss-rbcm-silence-1000-reports-0.1-scans-ce
 ss-rbcm-silence-1000-reports-0.1-scans-cells-10 ss-rbcm-silence-1000-reports-0.1-scans-cells-20
 ss-rbcm-silence-1000-reports-0.03-scans-cells-10 ss-rbcm-silence-1000-reports-0.3-scans-cells-10
 --paired-against ss-rbcm-silence-1000-reports-0.1-scans``, 3 min; the same with ``--noise-std 4
---clutter-rates 5``). Against one Gaussian, cells of 10 m changed the RMSE by -0.07 +- 0.10 /
--0.19 +- 0.17 m at sigma_z 1 (reference / random paths, paired) and by -0.54 +- 0.40 /
--0.34 +- 0.37 m at sigma_z 4, and took 3-sigma coverage on detected steps on S1's reference
-path at clutter 5 from 99.26 to 99.62 % (sigma_z 1) and from 98.55 to 99.14 % (sigma_z 4);
-over all cells from 99.74 to 99.77 % and from 99.13 to 99.23 %. Cells of 5 and 20 m were
-within 0.05 m of 10 m (5 m: 99.71 % on S1 at sigma_z 1, 99.09 % at 4), with more
-hypotheses for 5 m. The new-track probability stays 0.1: 0.03 gave 99.57 / 98.71 % on S1,
-0.3 cost S2's reference path at clutter 5 (5.36 to 7.10 m) as with one Gaussian. The median
-step did not change (0.71 against 0.73 ms on S1's reference path at clutter 5, one run)."""
+--clutter-rates 5``, 1 min). Against one Gaussian, cells of 10 m changed the RMSE by
+-0.07 +- 0.10 / -0.19 +- 0.16 m at sigma_z 1 (reference / random paths, paired) and by
+-0.55 +- 0.42 / -0.29 +- 0.33 m at sigma_z 4, and took 3-sigma coverage on detected steps on
+S1's reference path at clutter 5 from 99.26 to 99.64 % (sigma_z 1) and from 98.55 to
+99.17 % (sigma_z 4); over all cells from 99.74 to 99.77 % and from 99.13 to 99.23 %. Cells of
+5 m tied (-0.06 +- 0.11 / -0.27 +- 0.20 m; S1 99.74 and 99.21 %) with four times the
+cells, 20 m were a little worse on S1 (99.60 %). The new-track probability stays 0.1:
+0.03 gave 99.57 / 98.69 % on S1, and 0.3 cost S2's reference path at clutter 5 (5.36 to
+6.74 m) as with one Gaussian. The median step per cell was 0.62-1.06 ms against
+0.60-0.98 ms in the same run (the random paths have more gap ends)."""
 
 GAP_REGION_COMPONENTS = 16
-"""The most cells kept as hypotheses at a gap's end, those with the largest share times
-evidence (cells below 1e-9 of the best are dropped too); the cells elsewhere in the region
-explain no point."""
+"""The most cells of :data:`GAP_REGION_CELL` kept as hypotheses at a gap's end
+(:func:`kept_cells`): those with the largest share times evidence, their shares scaled so
+that they carry the whole region's share times evidence. Each point is near about four
+cells (their standard deviation is half their spacing), so at clutter rate 5, with five
+or more points in a disc, the cells of the least likely points are dropped: the new track's
+weight against the particles' stays exact, and its posterior is that of the likeliest
+points."""
 
 _NEGLIGIBLE_SHARE = 1e-9
+
+
+def kept_cells(log_scores: np.ndarray, count: int) -> tuple[np.ndarray, float]:
+    """Which of a new track's cells become hypotheses, from their ``log_scores`` (K,), each
+    cell's log share plus its log evidence: the indices of the ``count`` largest, less those
+    below 1e-9 of the largest, and the log factor by which their shares are scaled so that
+    the kept cells' total score is all cells', log sum_k e^(score_k) - log sum_kept
+    e^(score_k). Scores that are not finite count as -inf; if none is finite, the first
+    ``count`` cells are kept unscaled (the new track then has no weight)."""
+    scores = np.where(np.isfinite(log_scores), log_scores, -np.inf)
+    order = np.argsort(-scores, kind="stable")[:count]
+    best = scores[order[0]]
+    if not np.isfinite(best):
+        return order, 0.0
+    order = order[scores[order] >= best + np.log(_NEGLIGIBLE_SHARE)]
+    return order, float(np.logaddexp.reduce(scores) - np.logaddexp.reduce(scores[order]))
+
 
 PROCESS_NOISE_PRIORS = ("boundary-avoiding", "none")
 """What q's climb maximises besides the window's log marginal likelihood (step 5 of the module
@@ -494,9 +519,9 @@ class StateSpaceDGPT(TrackerBase):
             (:data:`GAP_RESTART_PROBABILITY`).
         gap_end_evidence: ``"scans"`` or ``"summaries"``: what weighs the hypotheses there
             (:data:`GAP_END_EVIDENCE`).
-        gap_region_cell: m, the side of the cells over which the new track there is spread,
-            >= 0; 0 gives one Gaussian (:data:`GAP_REGION_CELL`). Cells need
-            ``gap_end_evidence="scans"``.
+        gap_region_cell: m, the side of the cells over which the new track there is spread:
+            0 gives one Gaussian, else at least 1 (:data:`GAP_REGION_CELL`). With
+            ``gap_end="reports"``, cells need ``gap_end_evidence="scans"``.
         search_particles: with clutter at every sensor only: 0 (off), or N >= 10 particles of
             the search before the first track (:class:`agents.search.SearchFilter`; the
             registered trackers use :data:`agents.registration.SEARCH_PARTICLES`).
@@ -584,7 +609,13 @@ class StateSpaceDGPT(TrackerBase):
         )
         self.gap_end_evidence = check_choice("gap_end_evidence", gap_end_evidence, GAP_END_EVIDENCE)
         self.gap_region_cell = check_real("gap_region_cell", gap_region_cell, low=0.0)
-        if self.gap_region_cell > 0 and self.gap_end_evidence != "scans":
+        if 0 < self.gap_region_cell < 1:
+            raise ValueError(
+                "gap_region_cell must be 0 (one Gaussian) or at least 1 m (a lattice of "
+                f"cells over a region up to 100 m wide); got {gap_region_cell!r}"
+            )
+        uses_cells = self.gap_region_cell > 0 and self.gap_end == "reports"
+        if uses_cells and self.gap_end_evidence != "scans":
             raise ValueError(
                 "gap_region_cell: cells (> 0) need gap_end_evidence='scans', which picks "
                 f"them; got gap_region_cell={gap_region_cell!r} with gap_end_evidence="
@@ -1039,17 +1070,19 @@ class StateSpaceDGPT(TrackerBase):
 
     def _reporting_predictions(self, step: int, points, sensors, awake):
         """The step's predictions at the end of a coverage gap (``gap_end="reports"``,
-        :data:`GAP_ENDS`), as :meth:`_predictions` returns them, and their log evidence under
-        the step's scans (None with ``gap_end_evidence="summaries"``). The gap's particles
+        :data:`GAP_ENDS`) and their modes, as :meth:`_predictions` returns them, and their
+        log evidence under the step's scans (None with ``gap_end_evidence="summaries"``):
+        ``(predictions, modes, log_evidence)``. The gap's particles
         are carried to ``step`` and weighed by whether they lie in the disc of every sensor
         of ``sensors`` (those reporting) and of no other awake sensor
         (:func:`agents.silence.reporting_region`): one prediction per mode, the moments of
         its particles' kernel density there, with the mode's probability times
         1 - ``gap_restart_probability``. A new track in that region has
         ``gap_restart_probability``: one prediction, the region's moments
-        (:meth:`_region_prediction`), or with ``gap_region_cell`` > 0 the region's cells
-        (:meth:`_region_cells`). When no particle lies there, every mode's prediction is
-        the new track, with equal probabilities."""
+        (:meth:`_region_prediction`), or with ``gap_region_cell`` > 0 the cells of
+        :meth:`_region_cells` that :func:`kept_cells` keeps, each with that probability
+        times its scaled share. When no particle lies there, the new track's predictions
+        are in every mode, with equal probabilities."""
         spec = self.spec_
         states, weights, modes, kernel_cov = self._advance_particles(step)
         positions = np.asarray(spec.sensor_positions)
@@ -1085,11 +1118,12 @@ class StateSpaceDGPT(TrackerBase):
             evidence = self._scan_evidence(predictions, points, sensors, likelihood)
             restart_evidence = self._scan_evidence(restarts, points, sensors, likelihood)
             if len(restarts) > 1:  # the cells that carry the new track's posterior
-                score = np.log([share for _, share in restarts]) + restart_evidence
-                order = np.argsort(score)[::-1][:GAP_REGION_COMPONENTS]
-                order = order[score[order] >= score[order[0]] + np.log(_NEGLIGIBLE_SHARE)]
-                restarts = [restarts[i] for i in order]
-                restart_evidence = restart_evidence[order]
+                kept, log_scale = kept_cells(
+                    np.log([share for _, share in restarts]) + restart_evidence,
+                    GAP_REGION_COMPONENTS,
+                )
+                restarts = [(restarts[i][0], restarts[i][1] * np.exp(log_scale)) for i in kept]
+                restart_evidence = restart_evidence[kept]
         restarts = [(state, restart_probability * share) for state, share in restarts]
         if modes is None:
             predictions += restarts

@@ -810,6 +810,7 @@ def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
         ({"gap_end_evidence": "points"}, "gap_end_evidence"),
         ({"gap_region_cell": -1.0}, "gap_region_cell"),
         ({"gap_region_cell": float("nan")}, "gap_region_cell"),
+        ({"gap_region_cell": 0.5}, "gap_region_cell"),
         ({"gap_end_evidence": "summaries"}, "gap_region_cell"),  # cells need the scans
         ({"search_particles": 5}, "search_particles"),
         ({"search_settle_std": 0.0}, "search_settle_std"),
