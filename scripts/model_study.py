@@ -50,6 +50,23 @@ from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_
 MODEL_0_10 = {"turn_rates": (), "summary_variance": "point"}
 """The state-space model's arguments that 0.11.0 changed, as 0.10.0 had them."""
 
+
+def _gap_end_candidate(probability: float, evidence: str, cell: float):
+    """DGPT-RBCM with the silence and the reports' gap end: new-track probability, what
+    weighs the hypotheses there, and the new track's cell (0: one Gaussian)."""
+    return (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {
+            "aggregation": "rbcm",
+            "silence_particles": 1000,
+            "gap_end": "reports",
+            "gap_restart_probability": probability,
+            "gap_end_evidence": evidence,
+            "gap_region_cell": cell,
+        },
+    )
+
+
 CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp-trend": ("baselines.standard_gp:StandardGP", {"window": 3}),
@@ -270,44 +287,20 @@ CANDIDATES = {
         for probability in (0.05, 0.1)
     },
     **{
-        f"ss-rbcm-silence-1000-reports-{probability:g}": (
-            "agents.state_space_dgpt:StateSpaceDGPT",
-            {
-                "aggregation": "rbcm",
-                "silence_particles": 1000,
-                "gap_end": "reports",
-                "gap_restart_probability": probability,
-                "gap_end_evidence": "summaries",
-                "gap_region_cell": 0.0,
-            },
+        f"ss-rbcm-silence-1000-reports-{probability:g}": _gap_end_candidate(
+            probability, "summaries", 0.0
         )
         for probability in (0.0, 0.02, 0.1, 0.3, 0.6)
     },
     **{
-        f"ss-rbcm-silence-1000-reports-{probability:g}-scans": (
-            "agents.state_space_dgpt:StateSpaceDGPT",
-            {
-                "aggregation": "rbcm",
-                "silence_particles": 1000,
-                "gap_end": "reports",
-                "gap_restart_probability": probability,
-                "gap_end_evidence": "scans",
-                "gap_region_cell": 0.0,
-            },
+        f"ss-rbcm-silence-1000-reports-{probability:g}-scans": _gap_end_candidate(
+            probability, "scans", 0.0
         )
         for probability in (0.02, 0.1, 0.3)
     },
     **{
         f"ss-rbcm-silence-1000-reports-{probability:g}-scans-cells-{cell:g}": (
-            "agents.state_space_dgpt:StateSpaceDGPT",
-            {
-                "aggregation": "rbcm",
-                "silence_particles": 1000,
-                "gap_end": "reports",
-                "gap_restart_probability": probability,
-                "gap_end_evidence": "scans",
-                "gap_region_cell": cell,
-            },
+            _gap_end_candidate(probability, "scans", cell)
         )
         for probability in (0.03, 0.1, 0.3)
         for cell in (5.0, 10.0, 20.0)
@@ -410,7 +403,10 @@ that prior on which sensors report, with a new track of prior probability p
 (:data:`~agents.state_space_dgpt.GAP_ENDS`; ``hybrid-ncv-silence-1000-*`` the same inside
 the hybrid), its hypotheses weighed by their summaries as up to 0.20.0; ``-reports-<p>-scans``
 weighs them by the scans' evidence (:data:`~agents.state_space_dgpt.GAP_END_EVIDENCE`;
-``-reports-0.1-scans`` is ``dgpt-rbcm`` since 0.21.0). Results
+``-reports-0.1-scans`` is ``dgpt-rbcm`` of 0.21.0), both with the new track as one
+Gaussian, and ``-reports-<p>-scans-cells-<c>`` spreads the new track over cells of c m
+(:data:`~agents.state_space_dgpt.GAP_REGION_CELL`; ``-reports-0.1-scans-cells-10`` is
+``dgpt-rbcm`` since 0.22.0). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
