@@ -540,7 +540,7 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
             in_gap = True
         elif in_gap:
             assert tracker.dgpt.particles_ is None
-            log_priors, means, _, _ = tracker.dgpt.step_predictions_
+            log_priors, means, covs, _ = tracker.dgpt.step_predictions_
             weights = np.exp(log_priors - np.logaddexp.reduce(log_priors))
             if gap_end == "moments":
                 # the prediction made from the particles, split into its process-noise
@@ -553,7 +553,7 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
                 distances = np.linalg.norm(means[:, None, :, 0] - positions[reports][None], axis=-1)
                 assert np.all(distances <= spec.sensing_range)  # the discs' intersection is convex
                 # the new track: the region's cells near the points
-                shares, cell_means, _ = region_cells(
+                shares, cell_means, cell_vars = region_cells(
                     positions[reports],
                     positions[~reports],
                     spec.sensing_range,
@@ -567,11 +567,29 @@ def test_in_a_coverage_gap_the_hybrid_answers_with_its_dgpts_particles(gap_end):
                 assert new_track.sum() >= 1 and np.all(matches.sum(axis=1) == 1)
                 cell_shares = shares[np.argmax(matches, axis=1)]
                 # with no particle in the region, the new track in every mode, evenly; the
-                # kept cells' shares are scaled by one factor >= 1 (kept_cells)
+                # kept cells' shares are scaled by one factor (kept_cells), so that their
+                # prior times evidence is the new track's probability times every cell's
                 scale = 0.1 if not new_track.all() else 1.0 / len(tracker.dgpt.mode_transition)
                 ratios = np.exp(log_priors[new_track]) / (scale * cell_shares)
                 np.testing.assert_allclose(ratios, ratios[0], rtol=1e-12)
-                assert ratios[0] >= 1.0 - 1e-12
+                points = obs["measurements"][obs["mask"] > 0]
+                sensors = obs["sensor"][obs["mask"] > 0]
+                kept_evidence = gaussian_sums(
+                    means[new_track, :, 0],
+                    covs[new_track, :, 0, 0],
+                    points,
+                    likelihood,
+                    sensors=sensors,
+                ).log_evidence
+                cell_evidence = gaussian_sums(
+                    cell_means, cell_vars, points, likelihood, sensors=sensors
+                ).log_evidence
+                modes_count = 1 if not new_track.all() else len(tracker.dgpt.mode_transition)
+                assert np.logaddexp.reduce(log_priors[new_track] + kept_evidence) == pytest.approx(
+                    np.log(scale * modes_count)
+                    + np.logaddexp.reduce(np.log(shares) + cell_evidence),
+                    abs=1e-9,
+                )
             expected = predictions_posterior(tracker.dgpt, obs, likelihood)
             np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
             reacquisitions += 1

@@ -415,13 +415,15 @@ def test_the_kept_cells_carry_the_whole_regions_evidence():
     three modes. Each kept cell is one of the 16 with the largest share times evidence,
     recomputed here from :func:`agents.silence.region_cells` and the Gaussian sums of
     every cell, and the kept predictions' total prior times evidence equals all cells'
-    total (to rounding): dropping cells does not lower the new track's weight."""
+    total (to rounding): dropping cells does not lower the new track's weight. Each
+    hypothesis is weighed by its own prediction's evidence (the weights recomputed from
+    the predictions here, to 1e-9)."""
     spec = problem_spec(
         sensor_positions=((200.0, 200.0), (500.0, 500.0), (540.0, 500.0)),
         n_steps=20,
         clutter_rate=5.0,
     )
-    tracker = StateSpaceDGPT(aggregation="rbcm", silence_particles=1000)
+    tracker = HypothesisRecordingDGPT(aggregation="rbcm", silence_particles=1000)
     tracker.reset(spec, seed=3)
     for t in range(5):
         tracker.update(measurement_obs(t, [[205.0 + 10.0 * t, 200.0]], [0]))
@@ -453,6 +455,13 @@ def test_the_kept_cells_carry_the_whole_regions_evidence():
         assert np.any(np.all(np.isclose(top, mean), axis=1))
     assert np.logaddexp.reduce(log_priors + evidence) == pytest.approx(
         np.logaddexp.reduce(scores), abs=1e-9
+    )
+    recorded = tracker.hypothesis_log_weights_
+    expected = log_priors + evidence
+    np.testing.assert_allclose(
+        recorded - np.logaddexp.reduce(recorded),
+        expected - np.logaddexp.reduce(expected),
+        atol=1e-9,
     )
 
 
