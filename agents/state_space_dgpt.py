@@ -1115,8 +1115,10 @@ class StateSpaceDGPT(TrackerBase):
         evidence = None
         if self.gap_end_evidence == "scans":
             likelihood = PoissonLikelihood.from_spec(spec)
-            evidence = self._scan_evidence(predictions, points, sensors, likelihood)
-            restart_evidence = self._scan_evidence(restarts, points, sensors, likelihood)
+            every_evidence = self._scan_evidence(
+                predictions + restarts, points, sensors, likelihood
+            )
+            evidence, restart_evidence = np.split(every_evidence, [len(predictions)])
             if len(restarts) > 1:  # the cells that carry the new track's posterior
                 kept, log_scale = kept_cells(
                     np.log([share for _, share in restarts]) + restart_evidence,
@@ -1150,8 +1152,6 @@ class StateSpaceDGPT(TrackerBase):
         """The log evidence of each prediction ``((mean, cov), probability)`` under the
         step's points: its position's Gaussian integrated against the environment's
         per-sensor likelihood (:func:`agents.poisson_update.gaussian_sums`)."""
-        if not predictions:
-            return np.empty(0)
         return gaussian_sums(
             np.stack([state[0][:, 0] for state, _ in predictions]),
             np.stack([state[1][:, 0, 0] for state, _ in predictions]),
