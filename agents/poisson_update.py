@@ -12,8 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 
 from agents.likelihood import PoissonLikelihood
+from agents.silence import region_truncation
 
 __all__ = [
     "exact_posterior",
@@ -21,7 +23,18 @@ __all__ = [
     "GaussianSumPosterior",
     "mixture_posterior",
     "MixturePosterior",
+    "Region",
+    "LOG_MASS_BEYOND_QUADRATURE",
 ]
+
+Region = tuple[np.ndarray, np.ndarray, float, float]
+"""Which sensors report, as :func:`agents.silence.reporting_region` takes it:
+``(reporting_positions, silent_positions, sensing_range, area)``."""
+
+LOG_MASS_BEYOND_QUADRATURE = float(np.log1p(-((1.0 - 2.0 * special.ndtr(-4.0)) ** 2)))
+"""The log mass given to a prior's components when none of them has a lattice point in the
+region (:func:`agents.silence.region_truncation`): the mass outside a component's +-4
+standard-deviation box, 1 - (1 - 2 Phi(-4))^2 = 1.27e-4, which bounds theirs there."""
 
 
 @dataclass(frozen=True)
@@ -50,6 +63,7 @@ def exact_posterior(
     prune_tolerance: float = 1e-9,
     max_components: int = 256,
     sensors: np.ndarray | None = None,
+    region: Region | None = None,
 ) -> GaussianSumPosterior:
     """Posterior moments of N(x; mu, diag(P)) prod_j (c + lambda_T N(z_j; x, sigma_z^2 I)).
 
@@ -69,7 +83,8 @@ def exact_posterior(
     and then at least one target point (a zero-truncated Poisson count), so each sensor's
     factor is prod_(j in i) (c + lambda_T N_j) - c^(n_i) and only the subsets S with a
     target point from every reporting sensor remain. The pre-gate then keeps every
-    measurement of a sensor none of whose measurements passes it.
+    measurement of a sensor none of whose measurements passes it. ``region`` adds the
+    likelihood of which sensors report (:func:`gaussian_sums`).
     """
     result = gaussian_sums(
         np.asarray(prior_mean, dtype=float)[None, :],
@@ -79,6 +94,7 @@ def exact_posterior(
         prune_tolerance,
         max_components,
         sensors,
+        region,
     )
     return GaussianSumPosterior(
         result.mean[0],
@@ -97,13 +113,22 @@ def gaussian_sums(
     prune_tolerance: float = 1e-9,
     max_components: int = 256,
     sensors: np.ndarray | None = None,
+    region: Region | None = None,
 ) -> GaussianSumPosterior:
     """:func:`exact_posterior` of H priors at once, N(x; mu_h, diag(P_h)) (``prior_means``,
     ``prior_vars`` (H, 2)), under the same measurements: every field of the result has a
     leading axis H. The components of all priors are built in one pass over the
     measurements, each carrying its prior's index; a measurement that one prior's pre-gate
     skips splits only into its clutter branch there. Each prior's numbers are those of
-    :func:`exact_posterior` alone, up to rounding."""
+    :func:`exact_posterior` alone, up to rounding.
+
+    ``region`` (with ``sensors``: clutter only at the sensors that sense the target) adds the
+    likelihood of which sensors report, the indicator of the region where exactly those
+    sensors sense the target: each final component is cut to it
+    (:func:`agents.silence.region_truncation`), its weight times its mass there, so the
+    evidence and the moments are those of the whole likelihood. A prior none of whose
+    components reaches the region keeps its components, each with
+    :data:`LOG_MASS_BEYOND_QUADRATURE`."""
     noise_var = likelihood.noise_std**2
     log_clutter = np.log(likelihood.clutter_density) if likelihood.clutter_rate > 0 else -np.inf
     log_rate = np.log(likelihood.detection_rate)
@@ -221,6 +246,15 @@ def gaussian_sums(
         pruned = pruned + (1.0 - pruned) * dropped / np.where(total > 0, total, 1.0)
         means, variances, log_weights = means[keep], variances[keep], log_weights[keep]
         owner, has_target = owner[keep], has_target[keep]
+    if region is not None:
+        log_mass, means, variances = region_truncation(means, variances, *region)
+        reached = np.bincount(owner, np.isfinite(log_mass), minlength=count) > 0
+        log_mass = np.where(reached[owner], log_mass, LOG_MASS_BEYOND_QUADRATURE)
+        log_weights = log_weights + log_mass
+        largest = np.full(count, -np.inf)
+        np.maximum.at(largest, owner, log_weights)
+        log_weights -= largest[owner]
+        log_scale += largest
     weights = np.exp(log_weights)  # each prior's largest kept is at most 1: no overflow
     total = np.bincount(owner, weights, minlength=count)
     weights /= total[owner]
@@ -261,6 +295,7 @@ def mixture_posterior(
     likelihood: PoissonLikelihood,
     prune_tolerance: float = 1e-9,
     sensors: np.ndarray | None = None,
+    region: Region | None = None,
 ) -> MixturePosterior:
     """The exact posterior of the prior sum_h pi_h N(x; mu_h, diag(P_h)) (``log_priors``
     (H,), ``prior_means`` and ``prior_vars`` (H, 2)) under the measurement model of
@@ -269,9 +304,16 @@ def mixture_posterior(
     prediction is such a mixture (its IMM modes and process-noise components); the hybrid
     updates each component, so a component that the measurements favour (a manoeuvre, a
     turn) gains weight instead of the measurements being explained as clutter around the
-    collapsed prior."""
+    collapsed prior. ``region`` adds the likelihood of which sensors report
+    (:func:`gaussian_sums`)."""
     posteriors = gaussian_sums(
-        prior_means, prior_vars, measurements, likelihood, prune_tolerance, sensors=sensors
+        prior_means,
+        prior_vars,
+        measurements,
+        likelihood,
+        prune_tolerance,
+        sensors=sensors,
+        region=region,
     )
     log_weights = np.asarray(log_priors, dtype=float) + posteriors.log_evidence
     log_weights = log_weights - np.logaddexp.reduce(log_weights)

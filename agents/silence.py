@@ -26,6 +26,8 @@ __all__ = [
     "silent_region",
     "reporting_region",
     "region_cells",
+    "region_truncation",
+    "REGION_QUADRATURE",
     "particle_moments",
 ]
 
@@ -160,6 +162,107 @@ def region_cells(
     means = np.stack([np.bincount(square, weights=lattice[:, a]) / counts for a in (0, 1)], axis=1)
     variances = np.full(means.shape, (cell / 2) ** 2)
     return counts / counts.sum(), means, variances
+
+
+REGION_QUADRATURE = {"half_width": 4.0, "points": 40}
+"""The lattice of :func:`region_truncation`: ``points`` per axis at the midpoints of equal
+cells spanning +-``half_width`` standard deviations around a component's mean (a spacing of
+0.2 standard deviations)."""
+
+
+def _region_excludes_nothing(
+    low: np.ndarray,
+    high: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+) -> np.ndarray:
+    """(C,) True where the box [``low``, ``high``] (C, 2) lies wholly in the region of
+    :func:`reporting_region`: inside the area, inside every reporting disc (a disc is convex,
+    so its corners suffice) and apart from every silent disc (its nearest point is farther
+    than the range)."""
+    inside = np.all((low >= 0.0) & (high <= area), axis=1)
+    corners = np.stack(
+        [
+            low,
+            np.column_stack([low[:, 0], high[:, 1]]),
+            np.column_stack([high[:, 0], low[:, 1]]),
+            high,
+        ],
+        axis=1,
+    )  # (C, 4, 2)
+    for sensor in reporting_positions:
+        inside &= np.all(np.sum((corners - sensor) ** 2, axis=2) <= sensing_range**2, axis=1)
+    if len(silent_positions):
+        nearest = np.clip(silent_positions[None, :, :], low[:, None, :], high[:, None, :])
+        distance = np.sum((nearest - silent_positions[None, :, :]) ** 2, axis=2)
+        inside &= np.all(distance > sensing_range**2, axis=1)
+    return inside
+
+
+def region_truncation(
+    means: np.ndarray,
+    variances: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+    half_width: float = REGION_QUADRATURE["half_width"],
+    points: int = REGION_QUADRATURE["points"],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each Gaussian N(x; ``means[c]``, diag(``variances[c]``)) ((C, 2) each) cut to the
+    region of :func:`reporting_region` (the target's position when exactly the reporting
+    sensors report): ``(log_mass, means, variances)``, the log of its mass there and the
+    moments of its truncation. With clutter only at the sensors that sense the target, the
+    likelihood of which sensors report is that region's indicator, so this is the exact
+    update of a Gaussian by it.
+
+    A component whose +-``half_width`` standard-deviation box lies wholly in the region is
+    returned as it is, with mass 1 (what lies beyond the box is below 1.3e-4 of it at 4).
+    Otherwise the integrals are a midpoint rule on ``points`` x ``points`` cells over the box
+    (:data:`REGION_QUADRATURE`), each moment divided by the rule's own over the whole box, so
+    that a component the region does not cut keeps its moments. A component with no lattice
+    point in the region gets mass 0 (log -inf) and its moments unchanged."""
+    means = np.asarray(means, dtype=float)
+    variances = np.asarray(variances, dtype=float)
+    reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
+    silent_positions = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
+    log_mass = np.zeros(means.shape[0])
+    means_out, variances_out = means.copy(), variances.copy()
+    sd = np.sqrt(variances)
+    untouched = _region_excludes_nothing(
+        means - half_width * sd,
+        means + half_width * sd,
+        reporting_positions,
+        silent_positions,
+        sensing_range,
+        area,
+    )
+    cut = np.flatnonzero(~untouched)
+    if not cut.size:
+        return log_mass, means_out, variances_out
+    offsets = (np.arange(points) + 0.5) * (2.0 * half_width / points) - half_width
+    grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
+    density = np.exp(-0.5 * np.sum(grid**2, axis=1))  # (L,), standard normal up to a constant
+    full_mass = density.sum()
+    full_second = density @ grid**2 / full_mass  # (2,), the rule's own variance, about 1
+    lattice = means[cut, None, :] + sd[cut, None, :] * grid[None, :, :]  # (K, L, 2)
+    inside = reporting_region(
+        lattice.reshape(-1, 2), reporting_positions, silent_positions, sensing_range, area
+    ).reshape(len(cut), -1)
+    weights = inside * density  # (K, L)
+    mass = weights.sum(axis=1)
+    some = mass > 0
+    safe = np.where(some, mass, 1.0)[:, None]
+    first = weights @ grid / safe  # (K, 2), in standard deviations
+    second = weights @ grid**2 / safe - first**2
+    log_mass[cut] = np.where(some, np.log(np.where(some, mass, 1.0) / full_mass), -np.inf)
+    means_out[cut] = np.where(some[:, None], means[cut] + sd[cut] * first, means[cut])
+    variances_out[cut] = np.where(
+        some[:, None], variances[cut] * second / full_second, variances[cut]
+    )
+    return log_mass, means_out, variances_out
 
 
 def particle_moments(states: np.ndarray, weights: np.ndarray):

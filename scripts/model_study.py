@@ -331,6 +331,25 @@ CANDIDATES = {
         )
         for birth in (0.0003, 0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
     },
+    **{
+        f"ss-rbcm-silence-1000-turn-q{q:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", "silence_particles": 1000, "turn_process_noise": q},
+        )
+        for q in (5.0, 10.0, 20.0, 40.0)
+    },
+    **{
+        f"hybrid-{'region' if region else 'no-region'}": (
+            "agents.hybrid:HybridFilter",
+            {
+                "silence_particles": 1000,
+                "search_particles": 2000,
+                "gap_birth_probability": 0.003,
+                "reporting_region": region,
+            },
+        )
+        for region in (False, True)
+    },
     "ss-rbcm-silence-1000-moments": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "silence_particles": 1000, "gap_end": "moments"},
@@ -406,7 +425,10 @@ weighs them by the scans' evidence (:data:`~agents.state_space_dgpt.GAP_END_EVID
 ``-reports-0.1-scans`` is ``dgpt-rbcm`` of 0.21.0), both with the new track as one
 Gaussian, and ``-reports-<p>-scans-cells-<c>`` spreads the new track over cells of c m
 (:data:`~agents.state_space_dgpt.GAP_REGION_CELL`; ``-reports-0.1-scans-cells-10`` is
-``dgpt-rbcm`` since 0.22.0). Results
+``dgpt-rbcm`` since 0.22.0). ``ss-rbcm-silence-1000-turn-q<q>`` is ``dgpt-rbcm`` with turn
+process noise q (:data:`~agents.state_space_dgpt.TURN_MODES`; q 5 is the default), and
+``hybrid-region`` / ``hybrid-no-region`` the registered ``hybrid`` with and without the
+likelihood of which sensors report (:data:`agents.hybrid.REPORTING_REGION`). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 import dgpt_gym  # noqa: F401  (registers DGPTrack-v0 and the trackers)
+from agents.poisson_update import LOG_MASS_BEYOND_QUADRATURE
+from agents.silence import region_truncation
 from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.problem import ProblemSpec
@@ -113,11 +115,13 @@ def short_ppo(tmp_path):
     return train
 
 
-def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None):
+def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None, region=None):
     """The exact posterior by enumeration: every subset S of target points (with sensors,
     only the subsets with a point of every sensor), weight c^(n - |S|) lambda_T^|S| times
-    the prior predictive density of z_S, its component the Kalman update with z_S; returns
-    (mean, var, log evidence)."""
+    the prior predictive density of z_S, its component the Kalman update with z_S; with
+    ``region`` each component then cut to it by :func:`agents.silence.region_truncation`, its
+    weight times its mass there (the prior's bound on every component when none reaches it);
+    returns (mean, var, log evidence)."""
     c = model.clutter_rate / model.sensing_area
     noise = model.noise_std**2
     log_weights, means, variances = [], [], []
@@ -141,9 +145,14 @@ def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None):
         means.append(mean)
         variances.append(var)
     log_weights = np.array(log_weights)
+    means, variances = np.array(means), np.array(variances)
+    if region is not None:
+        log_mass, means, variances = region_truncation(means, variances, *region)
+        if not np.isfinite(log_mass).any():
+            log_mass = np.full(log_mass.shape, LOG_MASS_BEYOND_QUADRATURE)
+        log_weights = log_weights + log_mass
     weights = np.exp(log_weights - log_weights.max())
     total = weights.sum()
     weights /= total
-    means, variances = np.array(means), np.array(variances)
     mean = weights @ means
     return mean, weights @ (variances + (means - mean) ** 2), log_weights.max() + np.log(total)

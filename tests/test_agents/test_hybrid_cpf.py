@@ -291,6 +291,48 @@ def test_gaussian_sums_equal_the_enumeration_of_every_assignment(
         np.testing.assert_allclose(result.log_evidence[prior], log_evidence, rtol=1e-9)
 
 
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_priors=st.integers(1, 3),
+    n_points=st.integers(1, 6),
+    n_reporting=st.integers(1, 2),
+)
+@settings(max_examples=30, deadline=None)
+def test_gaussian_sums_with_the_region_equal_the_enumeration_cut_to_it(
+    seed, n_priors, n_points, n_reporting
+):
+    """With the region of which sensors report, each prior's moments and log evidence equal
+    the enumeration over target-point subsets (per-sensor model, no pruning) with every
+    component cut to the region and weighed by its mass there (conftest's
+    brute_force_posterior): the cut comes after the whole sum, per component. Reporting
+    discs of 10 m and two silent ones near the points, so that the region cuts."""
+    rng = np.random.default_rng(seed)
+    means = 50.0 + rng.uniform(-3.0, 3.0, (n_priors, 2))
+    variances = np.exp(rng.uniform(np.log(0.5), np.log(25.0), (n_priors, 2)))
+    points = 50.0 + rng.uniform(-8.0, 8.0, (n_points, 2))
+    sensors = rng.integers(0, 2, n_points)
+    reporting = 50.0 + rng.uniform(-4.0, 4.0, (n_reporting, 2))
+    silent = 50.0 + rng.uniform(-20.0, 20.0, (2, 2))
+    region = (reporting, silent, 10.0, 100.0)
+    result = gaussian_sums(
+        means,
+        variances,
+        points,
+        LIKELIHOOD,
+        prune_tolerance=0.0,
+        max_components=512,
+        sensors=sensors,
+        region=region,
+    )
+    for prior in range(n_priors):
+        mean, var, log_evidence = brute_force_posterior(
+            means[prior], variances[prior], points, LIKELIHOOD, sensors, region
+        )
+        np.testing.assert_allclose(result.mean[prior], mean, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(result.var[prior], var, rtol=1e-9)
+        np.testing.assert_allclose(result.log_evidence[prior], log_evidence, rtol=1e-9)
+
+
 def test_a_wide_prior_component_takes_points_that_agree_far_from_the_narrow_one():
     """A sharp turn (eq. (42)): four points agree near (30, 0), 15 standard deviations from
     the narrow component N(0, 4 I), and one clutter point lies near 0. The mixture's wide
@@ -948,3 +990,47 @@ def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior(prio
             checked += 1
         obs, *_ = env.step(estimate.mean)
     assert checked >= 40
+
+
+def test_with_the_reporting_region_the_hybrid_cuts_its_posterior_to_where_the_reports_put_it():
+    """With ``reporting_region=True`` the exact hybrid's estimate is the mixture posterior of
+    the DGPT's predictions with the region's likelihood: the reporting sensors' discs less
+    every other sensor's (built here from the spec and the step's sensors); on most steps
+    with measurements that moves the estimate from the posterior without it. The option
+    must be a bool."""
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0, noise_std=4.0)
+    tracker = PriorRecordingHybrid(reporting_region=True)
+    tracker.seen_ = []
+    obs, info = env.reset(seed=3)
+    spec = info["problem_spec"]
+    tracker.reset(spec, seed=3)
+    likelihood = PoissonLikelihood.from_spec(spec)
+    positions = np.asarray(spec.sensor_positions)
+    checked = moved = 0
+    for _ in range(40):
+        estimate = tracker.update(obs)
+        prior, predictions, measurements, sensors, _ = tracker.seen_[-1]
+        if prior is not None and predictions is not None and len(measurements):
+            log_priors, means, covs, _ = predictions
+            reporting = np.isin(np.arange(len(positions)), sensors)
+            region = (positions[reporting], positions[~reporting], spec.sensing_range, spec.area)
+            expected, without = (
+                mixture_posterior(
+                    log_priors,
+                    means[..., 0],
+                    covs[..., 0, 0],
+                    measurements,
+                    likelihood,
+                    sensors=sensors,
+                    region=cut,
+                )
+                for cut in (region, None)
+            )
+            np.testing.assert_allclose(estimate.mean, expected.mean, rtol=1e-12)
+            np.testing.assert_allclose(estimate.var, expected.var, rtol=1e-12)
+            checked += 1
+            moved += np.max(np.abs(expected.mean - without.mean)) > 1e-3
+        obs, *_ = env.step(estimate.mean)
+    assert checked > 25 and moved > checked / 2
+    with pytest.raises(TypeError, match="reporting_region"):
+        HybridFilter(reporting_region="yes")
