@@ -45,6 +45,7 @@ from agents import aggregation as agg
 from agents.dgpt import DGPT
 from agents.likelihood import PoissonLikelihood
 from agents.poisson_update import exact_posterior, mixture_posterior
+from agents.silence import reporting_and_silent
 from agents.state_space_dgpt import StateSpaceDGPT
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
@@ -372,9 +373,5 @@ class HybridFilter(TrackerBase):
         """The step's :data:`~agents.poisson_update.Region`: the sensors of ``sensors``
         report, every other awake sensor (all without an ``"awake"`` mask) is silent."""
         spec = self.spec_
-        positions = np.asarray(spec.sensor_positions, dtype=float)
-        reporting = np.zeros(len(positions), dtype=bool)
-        reporting[np.asarray(sensors, dtype=int)] = True
-        awake = obs.get("awake")
-        silent = ~reporting if awake is None else np.asarray(awake, dtype=bool) & ~reporting
-        return positions[reporting], positions[silent], spec.sensing_range, spec.area
+        reporting, silent = reporting_and_silent(spec.sensor_positions, sensors, obs.get("awake"))
+        return reporting, silent, spec.sensing_range, spec.area

@@ -24,6 +24,7 @@ __all__ = [
     "draw_particles",
     "propagate_particles",
     "silent_region",
+    "reporting_and_silent",
     "reporting_region",
     "region_cells",
     "region_truncation",
@@ -100,6 +101,19 @@ def silent_region(
         positions, k=1, distance_upper_bound=sensing_range
     )
     return inside & (distance > sensing_range)
+
+
+def reporting_and_silent(
+    sensor_positions: np.ndarray, sensors: np.ndarray, awake: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The positions of the sensors that report (those of ``sensors``, the step's reporting
+    sensor of each measurement) and of the awake ones that do not (every other sensor
+    without an ``awake`` mask), as :func:`reporting_region` takes them."""
+    sensor_positions = np.asarray(sensor_positions, dtype=float)
+    reporting = np.zeros(len(sensor_positions), dtype=bool)
+    reporting[np.asarray(sensors, dtype=int)] = True
+    silent = ~reporting if awake is None else np.asarray(awake, dtype=bool) & ~reporting
+    return sensor_positions[reporting], sensor_positions[silent]
 
 
 def reporting_region(

@@ -117,6 +117,7 @@ from agents.silence import (
     particle_moments,
     propagate_particles,
     region_cells,
+    reporting_and_silent,
     reporting_region,
     silent_region,
 )
@@ -1097,12 +1098,9 @@ class StateSpaceDGPT(TrackerBase):
         are in every mode, with equal probabilities."""
         spec = self.spec_
         states, weights, modes, kernel_cov = self._advance_particles(step)
-        positions = np.asarray(spec.sensor_positions)
-        reporting = np.zeros(len(positions), dtype=bool)
-        reporting[np.asarray(sensors, dtype=int)] = True
-        silent = ~reporting if awake is None else np.asarray(awake, dtype=bool) & ~reporting
+        reporting, silent = reporting_and_silent(spec.sensor_positions, sensors, awake)
         weights = weights * reporting_region(
-            states[..., 0], positions[reporting], positions[silent], spec.sensing_range, spec.area
+            states[..., 0], reporting, silent, spec.sensing_range, spec.area
         )
         explained = weights.sum() > 0
         predictions, prediction_modes = [], []
@@ -1121,9 +1119,9 @@ class StateSpaceDGPT(TrackerBase):
                 ]
                 prediction_modes += list(range(len(means)))
         if self.gap_region_cell > 0:
-            restarts = self._region_cells(positions[reporting], positions[silent])
+            restarts = self._region_cells(reporting, silent)
         else:
-            restarts = [(self._region_prediction(positions[reporting], positions[silent]), 1.0)]
+            restarts = [(self._region_prediction(reporting, silent), 1.0)]
         evidence = None
         if self.gap_end_evidence == "scans":
             likelihood = PoissonLikelihood.from_spec(spec)

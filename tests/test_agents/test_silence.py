@@ -716,16 +716,23 @@ def test_kernel_scale_is_silvermans_rule():
     assert kernel_scale(10, dimension=2) == pytest.approx((4.0 / 40.0) ** (1.0 / 3.0))
 
 
-def _half_plane(mean_x: float, edge: float, area: float = 1000.0):
-    """A reporting disc so large (radius 1e5 m) that near (mean_x, .) it is the half-plane
-    x <= mean_x + edge: over a 24 m box its boundary bends by 3e-3 mm."""
+def _half_plane(mean_x: float, edge: float, by: str, area: float = 1000.0):
+    """Discs so large (radius 1e5 m) that near (mean_x, 500) the region is the half-plane
+    x <= mean_x + edge (over a 24 m box a boundary bends by 3e-3 mm): the edge of a
+    reporting disc (``by="reporting"``), or of a silent one inside a reporting disc that
+    holds the whole area (``by="silent"``)."""
     radius = 1e5
-    return np.array([[mean_x + edge - radius, 500.0]]), np.empty((0, 2)), radius, area
+    if by == "reporting":
+        return np.array([[mean_x + edge - radius, 500.0]]), np.empty((0, 2)), radius, area
+    reporting, silent = np.array([[500.0, 500.0]]), np.array([[mean_x + edge + radius, 500.0]])
+    return reporting, silent, radius, area
 
 
+@pytest.mark.parametrize("by", ["reporting", "silent"])
 @pytest.mark.parametrize("edge_sd", [0.6, 2.2, -0.4])
-def test_region_truncation_of_a_half_plane_is_the_truncated_normal(edge_sd):
-    """Cut by x <= mu_x + c sd_x on a cell edge of the 0.2-sd lattice, the mass is Phi(c)
+def test_region_truncation_of_a_half_plane_is_the_truncated_normal(edge_sd, by):
+    """Cut by x <= mu_x + c sd_x (a reporting disc's edge, or a silent one's) on a cell edge
+    of the 0.2-sd lattice, the mass is Phi(c)
     and the x moments those of scipy's truncated normal, to the midpoint rule's error
     (order h^2 / 24 = 1.7e-3 relative at h = 0.2; the variance, a difference of moments,
     carries several times that when only a third of the mass is kept: 1.1 % at c = -0.4);
@@ -733,7 +740,7 @@ def test_region_truncation_of_a_half_plane_is_the_truncated_normal(edge_sd):
     mean, variance = np.array([[500.0, 500.0]]), np.array([[4.0, 9.0]])
     sd = np.sqrt(variance[0])
     log_mass, means, variances = region_truncation(
-        mean, variance, *_half_plane(500.0, edge_sd * sd[0])
+        mean, variance, *_half_plane(500.0, edge_sd * sd[0], by)
     )
     truncated = stats.truncnorm(-np.inf, edge_sd)
     np.testing.assert_allclose(np.exp(log_mass[0]), stats.norm.cdf(edge_sd), rtol=2e-3)
