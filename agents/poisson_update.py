@@ -32,8 +32,8 @@ Region = tuple[np.ndarray, np.ndarray, float, float]
 ``(reporting_positions, silent_positions, sensing_range, area)``."""
 
 LOG_MASS_BEYOND_QUADRATURE = float(np.log1p(-((1.0 - 2.0 * special.ndtr(-4.0)) ** 2)))
-"""The log mass given to a prior's components when none of them has a lattice point in the
-region (:func:`agents.silence.region_truncation`): the mass outside a component's +-4
+"""The log mass given to a prior's components when none of them has mass in the region on
+a row of its box (:func:`agents.silence.region_truncation`): the mass outside a component's +-4
 standard-deviation box, 1 - (1 - 2 Phi(-4))^2 = 1.27e-4, which bounds theirs there."""
 
 

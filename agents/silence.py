@@ -18,7 +18,7 @@ weights (N,) summing to one; resampling and the kernel bandwidth are
 from __future__ import annotations
 
 import numpy as np
-from scipy import spatial
+from scipy import spatial, special
 
 __all__ = [
     "draw_particles",
@@ -179,9 +179,9 @@ def region_cells(
 
 
 REGION_QUADRATURE = {"half_width": 4.0, "points": 40}
-"""The lattice of :func:`region_truncation`: ``points`` per axis at the midpoints of equal
+"""The rows of :func:`region_truncation`: ``points`` values of y at the midpoints of equal
 cells spanning +-``half_width`` standard deviations around a component's mean (a spacing of
-0.2 standard deviations)."""
+0.2 standard deviations); along each row the integral over x is exact."""
 
 
 def _region_excludes_nothing(
@@ -209,10 +209,73 @@ def _region_excludes_nothing(
     for sensor in reporting_positions:
         inside &= np.all(np.sum((corners - sensor) ** 2, axis=2) <= sensing_range**2, axis=1)
     if len(silent_positions):
-        nearest = np.clip(silent_positions[None, :, :], low[:, None, :], high[:, None, :])
-        distance = np.sum((nearest - silent_positions[None, :, :]) ** 2, axis=2)
+        distance = _box_distance2(low, high, silent_positions)
         inside &= np.all(distance > sensing_range**2, axis=1)
     return inside
+
+
+def _box_distance2(low: np.ndarray, high: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(C, k) squared distance from each box [``low``, ``high``] (C, 2) to each point (k, 2)."""
+    nearest = np.clip(points[None, :, :], low[:, None, :], high[:, None, :])
+    return np.sum((nearest - points[None, :, :]) ** 2, axis=2)
+
+
+def _normal_interval_moments(lower: np.ndarray, upper: np.ndarray):
+    """The standard normal's mass, first and second moments over [``lower``, ``upper``]
+    (finite, ``lower`` <= ``upper``, elementwise): Phi(b) - Phi(a), phi(a) - phi(b) and
+    Phi(b) - Phi(a) + a phi(a) - b phi(b). The mass of an interval in the upper tail is
+    taken as Phi(-a) - Phi(-b), which keeps its digits."""
+    upper_tail = lower > 0.0
+    mass = np.where(
+        upper_tail,
+        special.ndtr(-lower) - special.ndtr(-upper),
+        special.ndtr(upper) - special.ndtr(lower),
+    )
+    density_lower = np.exp(-0.5 * lower**2) / np.sqrt(2.0 * np.pi)
+    density_upper = np.exp(-0.5 * upper**2) / np.sqrt(2.0 * np.pi)
+    first = density_lower - density_upper
+    second = mass + lower * density_lower - upper * density_upper
+    return mass, first, second
+
+
+def _row_intervals(
+    rows: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+):
+    """Along each horizontal line y = ``rows`` (any shape S) from x = ``left`` to ``right``
+    (broadcast to S), the region of :func:`reporting_region` as an interval [``lower``,
+    ``upper``] of x (cut by the area and every reporting disc's chord) less the silent
+    discs' chords, returned as ``(lower, upper, holes_lower, holes_upper)``: the holes
+    (S + (k,)) are disjoint pieces of [``lower``, ``upper``], empty ones of zero width. An
+    empty row has ``lower`` = ``upper``."""
+    lower = np.broadcast_to(np.maximum(left, 0.0), rows.shape)
+    upper = np.where((rows >= 0.0) & (rows <= area), np.minimum(right, area), lower)
+    for x, y in reporting_positions:
+        half_chord2 = sensing_range**2 - (rows - y) ** 2
+        half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
+        lower = np.maximum(lower, x - half_chord)
+        upper = np.where(half_chord2 >= 0.0, np.minimum(upper, x + half_chord), lower)
+    upper = np.maximum(upper, lower)
+    half_chord2 = sensing_range**2 - (rows[..., None] - silent_positions[:, 1]) ** 2
+    half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
+    holes_lower = np.clip(silent_positions[:, 0] - half_chord, lower[..., None], upper[..., None])
+    holes_upper = np.clip(silent_positions[:, 0] + half_chord, lower[..., None], upper[..., None])
+    holes_upper = np.where(half_chord2 > 0.0, holes_upper, holes_lower)
+    # the union of the chords as disjoint pieces: sorted by start, each piece begins past
+    # the farthest end of those before it
+    order = np.argsort(holes_lower, axis=-1)
+    holes_lower = np.take_along_axis(holes_lower, order, axis=-1)
+    holes_upper = np.take_along_axis(holes_upper, order, axis=-1)
+    reach = np.maximum.accumulate(holes_upper, axis=-1)
+    before = np.concatenate([lower[..., None], reach[..., :-1]], axis=-1)
+    holes_lower = np.maximum(holes_lower, before)
+    holes_upper = np.maximum(holes_upper, holes_lower)
+    return lower, upper, holes_lower, holes_upper
 
 
 def region_truncation(
@@ -234,10 +297,14 @@ def region_truncation(
 
     A component whose +-``half_width`` standard-deviation box lies wholly in the region is
     returned as it is, with mass 1 (what lies beyond the box is below 1.3e-4 of it at 4).
-    Otherwise the integrals are a midpoint rule on ``points`` x ``points`` cells over the box
-    (:data:`REGION_QUADRATURE`), each moment divided by the rule's own over the whole box, so
-    that a component the region does not cut keeps its moments. A component with no lattice
-    point in the region gets mass 0 (log -inf) and its moments unchanged."""
+    Otherwise the integral over y is a midpoint rule on ``points`` rows across the box
+    (:data:`REGION_QUADRATURE`), and the integral over x along each row, within the box, is
+    exact: the region meets a horizontal line in one interval (the reporting discs' chords
+    and the area) less the silent discs' chords, over which a normal's moments are
+    differences of Phi and phi. Each moment is divided by the same integral over the whole
+    box, so that a component the region does not cut keeps its moments, and a component's
+    numbers depend on nothing beyond its box. A component the region leaves no mass on any
+    row gets mass 0 (log -inf) and its moments unchanged."""
     means = np.asarray(means, dtype=float)
     variances = np.asarray(variances, dtype=float)
     reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
@@ -245,36 +312,56 @@ def region_truncation(
     log_mass = np.zeros(means.shape[0])
     means_out, variances_out = means.copy(), variances.copy()
     sd = np.sqrt(variances)
+    low, high = means - half_width * sd, means + half_width * sd
+    # a silent disc can take mass from a box only if it reaches the box that holds every
+    # component's and, with reporting sensors, lies within 2 R of the first (so meets its
+    # disc, which holds the region)
+    near = _box_distance2(low.min(0)[None], high.max(0)[None], silent_positions)[0]
+    near = near <= sensing_range**2
+    if len(reporting_positions):
+        gap = np.sum((silent_positions - reporting_positions[0]) ** 2, axis=1)
+        near &= gap <= (2 * sensing_range) ** 2
+    silent_positions = silent_positions[near]
     untouched = _region_excludes_nothing(
-        means - half_width * sd,
-        means + half_width * sd,
-        reporting_positions,
-        silent_positions,
-        sensing_range,
-        area,
+        low, high, reporting_positions, silent_positions, sensing_range, area
     )
     cut = np.flatnonzero(~untouched)
     if not cut.size:
         return log_mass, means_out, variances_out
+    near = np.any(_box_distance2(low[cut], high[cut], silent_positions) <= sensing_range**2, 0)
     offsets = (np.arange(points) + 0.5) * (2.0 * half_width / points) - half_width
-    grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
-    density = np.exp(-0.5 * np.sum(grid**2, axis=1))  # (L,), standard normal up to a constant
-    full_mass = density.sum()
-    full_second = density @ grid**2 / full_mass  # (2,), the rule's own variance, about 1
-    lattice = means[cut, None, :] + sd[cut, None, :] * grid[None, :, :]  # (K, L, 2)
-    inside = reporting_region(
-        lattice.reshape(-1, 2), reporting_positions, silent_positions, sensing_range, area
-    ).reshape(len(cut), -1)
-    weights = inside * density  # (K, L)
+    row_weight = np.exp(-0.5 * offsets**2)  # (P,), the standard normal up to a constant
+    box_mass, _, box_second = _normal_interval_moments(np.array(-half_width), half_width)
+    full_mass = row_weight.sum() * box_mass
+    full_second = np.array([box_second / box_mass, row_weight @ offsets**2 / row_weight.sum()])
+    centre, scale = means[cut, 0, None], sd[cut, 0, None]
+    lower, upper, holes_lower, holes_upper = _row_intervals(
+        means[cut, 1, None] + sd[cut, 1, None] * offsets,  # (K, P)
+        low[cut, 0, None],
+        high[cut, 0, None],
+        reporting_positions,
+        silent_positions[near],
+        sensing_range,
+        area,
+    )
+    row = np.stack(_normal_interval_moments((lower - centre) / scale, (upper - centre) / scale))
+    holes = _normal_interval_moments(
+        (holes_lower - centre[..., None]) / scale[..., None],
+        (holes_upper - centre[..., None]) / scale[..., None],
+    )
+    row -= np.stack([h.sum(axis=-1) for h in holes])  # (3, K, P): x mass, first, second
+    row *= row[0] > 0.0  # a row whose chords leave nothing (or rounding below it) adds none
+    weights = row[0] * row_weight  # (K, P), each row's share of the mass
     mass = weights.sum(axis=1)
     some = mass > 0
-    safe = np.where(some, mass, 1.0)[:, None]
-    first = weights @ grid / safe  # (K, 2), in standard deviations
-    second = weights @ grid**2 / safe - first**2
-    log_mass[cut] = np.where(some, np.log(np.where(some, mass, 1.0) / full_mass), -np.inf)
+    safe = np.where(some, mass, 1.0)
+    first = np.column_stack([row[1] @ row_weight, weights @ offsets]) / safe[:, None]
+    second = np.column_stack([row[2] @ row_weight, weights @ offsets**2]) / safe[:, None]
+    second = (second - first**2) / full_second
+    log_mass[cut] = np.where(some, np.log(safe / full_mass), -np.inf)
     means_out[cut] = np.where(some[:, None], means[cut] + sd[cut] * first, means[cut])
     variances_out[cut] = np.where(
-        some[:, None], variances[cut] * second / full_second, variances[cut]
+        some[:, None], variances[cut] * np.maximum(second, 0.0), variances[cut]
     )
     return log_mass, means_out, variances_out
 

@@ -716,43 +716,70 @@ def test_kernel_scale_is_silvermans_rule():
     assert kernel_scale(10, dimension=2) == pytest.approx((4.0 / 40.0) ** (1.0 / 3.0))
 
 
-def _half_plane(mean_x: float, edge: float, by: str, area: float = 1000.0):
-    """Discs so large (radius 1e5 m) that near (mean_x, 500) the region is the half-plane
-    x <= mean_x + edge (over a 24 m box a boundary bends by 3e-3 mm): the edge of a
-    reporting disc (``by="reporting"``), or of a silent one inside a reporting disc that
-    holds the whole area (``by="silent"``)."""
-    radius = 1e5
+def _half_plane(edge: float, axis: int, by: str, area: float = 1000.0):
+    """Discs so large (radius 1e7 m) that near (500, 500) the region is the half-plane
+    position[``axis``] <= 500 + ``edge`` (across a +-12 m box a boundary bends by
+    12^2 / 2e7 = 7e-6 m): the edge of a reporting disc (``by="reporting"``), or of a silent
+    one inside a reporting disc that holds the whole area (``by="silent"``)."""
+    radius = 1e7
+    centre = np.full(2, 500.0)
     if by == "reporting":
-        return np.array([[mean_x + edge - radius, 500.0]]), np.empty((0, 2)), radius, area
-    reporting, silent = np.array([[500.0, 500.0]]), np.array([[mean_x + edge + radius, 500.0]])
-    return reporting, silent, radius, area
+        centre[axis] += edge - radius
+        return centre[None], np.empty((0, 2)), radius, area
+    centre[axis] += edge + radius
+    return np.array([[500.0, 500.0]]), centre[None], radius, area
 
 
 @pytest.mark.parametrize("by", ["reporting", "silent"])
 @pytest.mark.parametrize("edge_sd", [0.6, 2.2, -0.4])
 def test_region_truncation_of_a_half_plane_is_the_truncated_normal(edge_sd, by):
-    """Cut by x <= mu_x + c sd_x (a reporting disc's edge, or a silent one's) on a cell edge
-    of the 0.2-sd lattice, the mass is Phi(c)
-    and the x moments those of scipy's truncated normal, to the midpoint rule's error
-    (order h^2 / 24 = 1.7e-3 relative at h = 0.2; the variance, a difference of moments,
-    carries several times that when only a third of the mass is kept: 1.1 % at c = -0.4);
-    y, which the cut does not touch, keeps its moments to rounding."""
+    """Cut by x <= mu_x + c sd_x (a reporting disc's edge, or a silent one's), the integral
+    along the rows is exact within the component's +-4 sd box: the mass is (Phi(c) -
+    Phi(-4)) / (Phi(4) - Phi(-4)), the mean scipy's normal truncated to [-4, c], and the
+    variance that one's over the one truncated to [-4, 4] (the whole box), to the
+    boundary's bend (7e-6 m, 3.5e-6 sd); y, which the cut does not touch, keeps its moments
+    to the bend's effect on the rows' masses."""
     mean, variance = np.array([[500.0, 500.0]]), np.array([[4.0, 9.0]])
     sd = np.sqrt(variance[0])
     log_mass, means, variances = region_truncation(
-        mean, variance, *_half_plane(500.0, edge_sd * sd[0], by)
+        mean, variance, *_half_plane(edge_sd * sd[0], 0, by)
+    )
+    truncated, box = stats.truncnorm(-4.0, edge_sd), stats.truncnorm(-4.0, 4.0)
+    mass = (stats.norm.cdf(edge_sd) - stats.norm.cdf(-4.0)) / (1.0 - 2.0 * stats.norm.cdf(-4.0))
+    np.testing.assert_allclose(np.exp(log_mass[0]), mass, rtol=1e-5)
+    np.testing.assert_allclose(means[0, 0], 500.0 + sd[0] * truncated.mean(), atol=1e-5 * sd[0])
+    np.testing.assert_allclose(
+        variances[0, 0], variance[0, 0] * truncated.var() / box.var(), rtol=1e-5
+    )
+    np.testing.assert_allclose([means[0, 1], variances[0, 1]], [500.0, 9.0], rtol=1e-6)
+
+
+@pytest.mark.parametrize("by", ["reporting", "silent"])
+@pytest.mark.parametrize("edge_sd", [0.6, 2.2, -0.4])
+def test_region_truncation_across_the_rows_is_the_midpoint_rule(edge_sd, by):
+    """Cut by y <= mu_y + c sd_y on a row boundary of the 0.2-sd rule, the mass is Phi(c)
+    and the y moments those of scipy's truncated normal, to the midpoint rule's error (order
+    h^2 / 24 = 1.7e-3 relative at h = 0.2; the variance, a difference of moments, carries
+    several times that when only a third of the mass is kept: 1.1 % at c = -0.4); x, which
+    the cut does not touch, keeps its moments to rounding."""
+    mean, variance = np.array([[500.0, 500.0]]), np.array([[4.0, 9.0]])
+    sd = np.sqrt(variance[0])
+    log_mass, means, variances = region_truncation(
+        mean, variance, *_half_plane(edge_sd * sd[1], 1, by)
     )
     truncated = stats.truncnorm(-np.inf, edge_sd)
     np.testing.assert_allclose(np.exp(log_mass[0]), stats.norm.cdf(edge_sd), rtol=2e-3)
-    np.testing.assert_allclose(means[0, 0], 500.0 + sd[0] * truncated.mean(), atol=2e-3 * sd[0])
-    np.testing.assert_allclose(variances[0, 0], variance[0, 0] * truncated.var(), rtol=1.5e-2)
-    np.testing.assert_allclose([means[0, 1], variances[0, 1]], [500.0, 9.0], rtol=1e-12)
+    np.testing.assert_allclose(means[0, 1], 500.0 + sd[1] * truncated.mean(), atol=2e-3 * sd[1])
+    np.testing.assert_allclose(variances[0, 1], variance[0, 1] * truncated.var(), rtol=1.5e-2)
+    np.testing.assert_allclose([means[0, 0], variances[0, 0]], [500.0, 4.0], rtol=1e-12)
 
 
 def test_region_truncation_matches_a_dense_grid_within_the_cells_the_boundary_crosses():
     """Two reporting discs and a silent one (radius 50 m) cut a wide Gaussian: the mass
-    and mean equal a 0.05 m grid's to within the Gaussian mass of the lattice cells whose
-    corners the region splits (the only cells the midpoint rule can misjudge)."""
+    and mean equal a 0.05 m grid's to within the Gaussian mass of the 0.2-sd cells whose
+    corners the region splits: along each row the integral is exact, and across the rows
+    the midpoint rule can misjudge only a cell the boundary crosses (elsewhere the indicator
+    is constant over the cell)."""
     reporting = np.array([[100.0, 100.0], [150.0, 110.0]])
     silent = np.array([[120.0, 150.0], [400.0, 400.0]])
     mean, variance = np.array([[125.0, 100.0]]), np.array([[100.0, 64.0]])
@@ -784,9 +811,45 @@ def test_region_truncation_matches_a_dense_grid_within_the_cells_the_boundary_cr
     assert np.all(np.abs(means[0] - centre) <= bound * half * sd / mass)
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    silent=st.lists(
+        st.tuples(st.floats(40.0, 160.0), st.floats(60.0, 140.0)), min_size=1, max_size=5
+    ),
+    mean_x=st.floats(60.0, 140.0),
+    sd_x=st.floats(3.0, 30.0),
+)
+def test_region_truncation_along_one_row_is_exact_under_overlapping_silent_discs(
+    silent, mean_x, sd_x
+):
+    """A component of negligible height (sd_y 1e-6 m) is cut along the one line y = 100:
+    within a reporting disc, less up to five silent discs' chords that overlap as they
+    will. Mass and mean equal a 1 mm grid's along the line to within the grid's own error,
+    one cell's mass at each point where the indicator changes (the +-9 sd box keeps a
+    component the region does not cut from being returned whole with mass beyond it)."""
+    reporting, silent = np.array([[100.0, 100.0]]), np.array(silent)
+    mean, variance = np.array([[mean_x, 100.0]]), np.array([[sd_x**2, 1e-12]])
+    log_mass, means, _ = region_truncation(
+        mean, variance, reporting, silent, 50.0, 1000.0, half_width=9.0
+    )
+    step = 1e-3
+    x = np.arange(mean_x - 9 * sd_x, mean_x + 9 * sd_x, step)
+    inside = reporting_region(
+        np.column_stack([x, np.full_like(x, 100.0)]), reporting, silent, 50.0, 1000.0
+    )
+    density = stats.norm.pdf(x, mean_x, sd_x) * step
+    changes = np.count_nonzero(np.diff(inside.astype(int)))
+    bound = changes * density.max() + x.size * np.finfo(float).eps  # cells, then rounding
+    mass = density[inside].sum()
+    assert abs(np.exp(log_mass[0]) - mass) <= bound
+    if mass > 1e-3:
+        centre = density[inside] @ x[inside] / mass
+        assert abs(means[0, 0] - centre) <= bound * 9 * sd_x / mass
+
+
 def test_region_truncation_keeps_a_component_inside_and_zeroes_one_outside():
     """A component whose 4-sd box lies in the region is returned bit for bit with mass 1;
-    one with no lattice point in it gets mass 0 and keeps its moments."""
+    one the region leaves no mass on any row gets mass 0 and keeps its moments."""
     reporting, silent = np.array([[100.0, 100.0]]), np.array([[300.0, 300.0]])
     means = np.array([[100.0, 100.0], [300.0, 300.0]])
     variances = np.array([[4.0, 1.0], [4.0, 4.0]])
