@@ -154,7 +154,7 @@ def _warn_paper_variant_once(detection_rate: float) -> None:
         )
 
 
-REPORTING_REGION = False
+REPORTING_REGION = True
 """The exact variant's default for ``reporting_region``. With clutter only at the sensors
 that sense the target and a zero-truncated target count (Sec. VI-A), a sensor reports
 exactly when the target lies in its disc, so the likelihood of a step holds, beside the
@@ -164,19 +164,18 @@ component of the Gaussian sum to that region and weighs it by its mass there
 (:func:`agents.poisson_update.gaussian_sums` with ``region``). Neither the DGPT's update nor
 the per-sensor model uses it otherwise.
 
-On training seeds 1000-1023 (S1-S4, clutter 1 and 5, fixed and random paths, sigma_z 1;
-``python scripts/model_study.py --seeds 24 --candidates ss-rbcm-silence-1000-turn-q5
-hybrid-no-region hybrid-region --paired-against ss-rbcm-silence-1000-turn-q5``, 12 min),
-against ``dgpt-rbcm``: with the region -0.22 +- 0.16 / -0.27 +- 0.19 m RMSE, paired, on the
-fixed / random paths; without it -0.04 +- 0.16 / -0.14 +- 0.19 m. 3-sigma coverage on
-detected steps 99.70 % against 99.69 %. At clutter 5 on the reference paths the hybrid
-with the region had the lower mean RMSE than ``dgpt-rbcm`` in all four scenarios (S1-S4:
-8.74, 4.95, 7.95, 6.63 m against 9.13, 5.40, 8.43, 6.73 m; not paired per scenario). The
-cost keeps it off: the lattice of :func:`agents.silence.region_truncation` over every
-component the region cuts took the mean step on the reference paths from 1.5-1.6 ms to
-2.5-5.0 ms at clutter 1 and from 1.8-2.1 ms to 4.9-11.0 ms at clutter 5 (random paths up to
-19 ms, where the Gaussian sums hold more components): about three times the hybrid's 251
-worker-seconds in the ``--paper`` grid."""
+Chosen on training seeds 1000-1023 (S1-S4, clutter 1 and 5, fixed and random paths,
+sigma_z 1; ``python scripts/model_study.py --seeds 24 --candidates
+ss-rbcm-silence-1000-turn-q5 hybrid-no-region hybrid-region --paired-against
+ss-rbcm-silence-1000-turn-q5``, 4 min): against ``dgpt-rbcm``, with the region -0.24 +- 0.16
+/ -0.26 +- 0.18 m RMSE, paired, on the fixed / random paths; without it -0.04 +- 0.16 /
+-0.14 +- 0.19 m. 3-sigma coverage on detected steps 99.69 % either way (``dgpt-rbcm``
+99.77 %). At clutter 5 the hybrid with the region had the lower mean RMSE than
+``dgpt-rbcm`` in all four scenarios on both path modes (reference paths S1-S4: 8.74, 4.91,
+7.94, 6.57 m against 9.13, 5.40, 8.43, 6.73 m; without the region 9.26, 5.49, 8.05, 6.61 m).
+It costs about 1.4 times the hybrid's step (reference paths, clutter 5, one episode at a
+time: 2.6-3.0 ms without, 3.7-4.2 ms with), the quadrature of
+:func:`agents.silence.region_truncation` being exact along each row of a component's box."""
 
 
 class HybridFilter(TrackerBase):
@@ -211,7 +210,7 @@ class HybridFilter(TrackerBase):
         prior_model: the exact variant's prior around ``gp="ncv"`` (:data:`PRIOR_MODELS`);
             None: ``"mixture"`` there, ``"moments"`` otherwise (the only choice).
         reporting_region: with the per-sensor model, also the likelihood of which sensors
-            report (:data:`REPORTING_REGION`); off by default.
+            report (:data:`REPORTING_REGION`).
         **dgpt_kwargs: arguments of the wrapped tracker (aggregation, window,
             silence_particles, ...).
     """

@@ -178,6 +178,10 @@ def region_cells(
     return counts / counts.sum(), means, variances
 
 
+REGION_CHUNK = 2**20
+"""About how many elements a temporary array of :func:`region_truncation` holds at most
+(components x rows x silent discs): 8 MB of float64."""
+
 REGION_QUADRATURE = {"half_width": 4.0, "points": 40}
 """The rows of :func:`region_truncation`: ``points`` values of y at the midpoints of equal
 cells spanning +-``half_width`` standard deviations around a component's mean (a spacing of
@@ -214,10 +218,45 @@ def _region_excludes_nothing(
     return inside
 
 
+def _region_misses(
+    low: np.ndarray,
+    high: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+) -> np.ndarray:
+    """(C,) True where the box [``low``, ``high``] (C, 2) has no point in the region of
+    :func:`reporting_region`: it lies beyond the area, apart from a reporting disc, or
+    wholly inside a silent one (a disc is convex, so its corners suffice)."""
+    misses = np.any((high < 0.0) | (low > area), axis=1)
+    if len(reporting_positions):
+        distance = _box_distance2(low, high, reporting_positions)
+        misses |= np.any(distance > sensing_range**2, axis=1)
+    if len(silent_positions):
+        farthest = np.maximum(
+            np.abs(silent_positions[None, :, :] - low[:, None, :]),
+            np.abs(silent_positions[None, :, :] - high[:, None, :]),
+        )  # (C, k, 2), the farthest corner's offsets
+        misses |= np.any(np.sum(farthest**2, axis=2) <= sensing_range**2, axis=1)
+    return misses
+
+
 def _box_distance2(low: np.ndarray, high: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(C, k) squared distance from each box [``low``, ``high``] (C, 2) to each point (k, 2)."""
     nearest = np.clip(points[None, :, :], low[:, None, :], high[:, None, :])
     return np.sum((nearest - points[None, :, :]) ** 2, axis=2)
+
+
+def _discs_reaching(
+    low: np.ndarray, high: np.ndarray, positions: np.ndarray, sensing_range: float
+) -> np.ndarray:
+    """The sensors of ``positions`` whose disc reaches the box that holds every box
+    [``low``, ``high``] (C, 2): only those can take mass from a component in it."""
+    if not len(low):
+        return positions[:0]
+    box = np.min(low, axis=0)[None], np.max(high, axis=0)[None]
+    return positions[_box_distance2(*box, positions)[0] <= sensing_range**2]
 
 
 def _normal_interval_moments(lower: np.ndarray, upper: np.ndarray):
@@ -309,38 +348,72 @@ def region_truncation(
     variances = np.asarray(variances, dtype=float)
     reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
     silent_positions = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
-    log_mass = np.zeros(means.shape[0])
-    means_out, variances_out = means.copy(), variances.copy()
+    if len(reporting_positions):
+        # the region lies in the first reporting disc: only a silent disc within 2 R of it
+        # can take mass from it
+        gap = np.sum((silent_positions - reporting_positions[0]) ** 2, axis=1)
+        silent_positions = silent_positions[gap <= (2 * sensing_range) ** 2]
     sd = np.sqrt(variances)
     low, high = means - half_width * sd, means + half_width * sd
-    # a silent disc can take mass from a box only if it reaches the box that holds every
-    # component's and, with reporting sensors, lies within 2 R of the first (so meets its
-    # disc, which holds the region)
-    near = _box_distance2(low.min(0)[None], high.max(0)[None], silent_positions)[0]
-    near = near <= sensing_range**2
-    if len(reporting_positions):
-        gap = np.sum((silent_positions - reporting_positions[0]) ** 2, axis=1)
-        near &= gap <= (2 * sensing_range) ** 2
-    silent_positions = silent_positions[near]
-    untouched = _region_excludes_nothing(
-        low, high, reporting_positions, silent_positions, sensing_range, area
+    silent_positions = _discs_reaching(low, high, silent_positions, sensing_range)
+    # A Gaussian sum can hold millions of components: both passes go in chunks whose
+    # temporaries (components x silent discs, then x rows) stay near REGION_CHUNK elements.
+    # A box wholly in the region keeps its component (mass 1); one with no point in it
+    # gives mass 0; only the rest need the rows.
+    chunk = max(1, REGION_CHUNK // (len(silent_positions) + len(reporting_positions) + 1))
+    boxes = [
+        (low[start : start + chunk], high[start : start + chunk])
+        for start in range(0, len(means), chunk)
+    ]
+    sets = (reporting_positions, silent_positions, sensing_range, area)
+    untouched = np.concatenate(
+        [_region_excludes_nothing(*box, *sets) for box in boxes] or [np.zeros(0, bool)]
     )
-    cut = np.flatnonzero(~untouched)
-    if not cut.size:
-        return log_mass, means_out, variances_out
-    near = np.any(_box_distance2(low[cut], high[cut], silent_positions) <= sensing_range**2, 0)
+    missed = np.concatenate([_region_misses(*box, *sets) for box in boxes] or [np.zeros(0, bool)])
+    log_mass = np.where(missed, -np.inf, 0.0)
+    means_out, variances_out = means.copy(), variances.copy()
+    cut = np.flatnonzero(~untouched & ~missed)
+    chunk = max(1, chunk // points)
+    for start in range(0, cut.size, chunk):
+        part = cut[start : start + chunk]
+        log_mass[part], means_out[part], variances_out[part] = _cut_to_region(
+            means[part],
+            sd[part],
+            reporting_positions,
+            _discs_reaching(low[part], high[part], silent_positions, sensing_range),
+            sensing_range,
+            area,
+            half_width,
+            points,
+        )
+    return log_mass, means_out, variances_out
+
+
+def _cut_to_region(
+    means: np.ndarray,
+    sd: np.ndarray,
+    reporting_positions: np.ndarray,
+    silent_positions: np.ndarray,
+    sensing_range: float,
+    area: float,
+    half_width: float,
+    points: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows' quadrature of :func:`region_truncation` for components (means and standard
+    deviations (K, 2)) the region cuts, ``silent_positions`` the discs that reach their
+    boxes."""
     offsets = (np.arange(points) + 0.5) * (2.0 * half_width / points) - half_width
     row_weight = np.exp(-0.5 * offsets**2)  # (P,), the standard normal up to a constant
     box_mass, _, box_second = _normal_interval_moments(np.array(-half_width), half_width)
     full_mass = row_weight.sum() * box_mass
     full_second = np.array([box_second / box_mass, row_weight @ offsets**2 / row_weight.sum()])
-    centre, scale = means[cut, 0, None], sd[cut, 0, None]
+    centre, scale = means[:, 0, None], sd[:, 0, None]
     lower, upper, holes_lower, holes_upper = _row_intervals(
-        means[cut, 1, None] + sd[cut, 1, None] * offsets,  # (K, P)
-        low[cut, 0, None],
-        high[cut, 0, None],
+        means[:, 1, None] + sd[:, 1, None] * offsets,  # (K, P)
+        centre - half_width * scale,
+        centre + half_width * scale,
         reporting_positions,
-        silent_positions[near],
+        silent_positions,
         sensing_range,
         area,
     )
@@ -358,11 +431,9 @@ def region_truncation(
     first = np.column_stack([row[1] @ row_weight, weights @ offsets]) / safe[:, None]
     second = np.column_stack([row[2] @ row_weight, weights @ offsets**2]) / safe[:, None]
     second = (second - first**2) / full_second
-    log_mass[cut] = np.where(some, np.log(safe / full_mass), -np.inf)
-    means_out[cut] = np.where(some[:, None], means[cut] + sd[cut] * first, means[cut])
-    variances_out[cut] = np.where(
-        some[:, None], variances[cut] * np.maximum(second, 0.0), variances[cut]
-    )
+    log_mass = np.where(some, np.log(safe / full_mass), -np.inf)
+    means_out = np.where(some[:, None], means + sd * first, means)
+    variances_out = np.where(some[:, None], sd**2 * np.maximum(second, 0.0), sd**2)
     return log_mass, means_out, variances_out
 
 

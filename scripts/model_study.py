@@ -71,6 +71,13 @@ CANDIDATES = {
     "se-trend": ("agents.dgpt:DGPT", {"window": 3}),
     "gp-trend": ("baselines.standard_gp:StandardGP", {"window": 3}),
     "hybrid-trend": ("agents.hybrid:HybridFilter", {"gp": "se", "window": 3}),
+    **{
+        f"hybrid-trend-{'region' if region else 'no-region'}": (
+            "agents.hybrid:HybridFilter",
+            {"gp": "se", "window": 3, "reporting_region": region},
+        )
+        for region in (False, True)
+    },
     "hybrid-ncv": ("agents.hybrid:HybridFilter", {"gp": "ncv"}),
     "hybrid-ncv-moments": ("agents.hybrid:HybridFilter", {"gp": "ncv", "prior_model": "moments"}),
     "hybrid-ncv-silence-1000": (
@@ -427,8 +434,9 @@ Gaussian, and ``-reports-<p>-scans-cells-<c>`` spreads the new track over cells 
 (:data:`~agents.state_space_dgpt.GAP_REGION_CELL`; ``-reports-0.1-scans-cells-10`` is
 ``dgpt-rbcm`` since 0.22.0). ``ss-rbcm-silence-1000-turn-q<q>`` is ``dgpt-rbcm`` with turn
 process noise q (:data:`~agents.state_space_dgpt.TURN_MODES`; q 5 is the default), and
-``hybrid-region`` / ``hybrid-no-region`` the registered ``hybrid`` with and without the
-likelihood of which sensors report (:data:`agents.hybrid.REPORTING_REGION`). Results
+``hybrid-region`` / ``hybrid-no-region`` the registered ``hybrid`` (``hybrid-trend-region`` /
+``hybrid-trend-no-region``: ``hybrid-trend``) with and without the likelihood of which
+sensors report (:data:`agents.hybrid.REPORTING_REGION`). Results
 in docs/analysis.md's sections before 0.10.0 came from the code of their version."""
 
 DEFAULT_CANDIDATES = (
@@ -457,7 +465,9 @@ def parse_args(argv):
         nargs="+",
         choices=sorted(CANDIDATES),
         default=list(DEFAULT_CANDIDATES),
-        help="default: " + " ".join(DEFAULT_CANDIDATES),
+        metavar="NAME",
+        help=f"one or more of the {len(CANDIDATES)} candidates of CANDIDATES (an unknown name "
+        "lists them all); default: " + " ".join(DEFAULT_CANDIDATES),
     )
     parser.add_argument("--seeds", type=int, default=6, help="seeds FIRST .. FIRST+N-1")
     parser.add_argument(

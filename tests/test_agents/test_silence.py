@@ -5,7 +5,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from conftest import brute_force_posterior, measurement_obs, problem_spec
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
@@ -819,16 +819,19 @@ def test_region_truncation_matches_a_dense_grid_within_the_cells_the_boundary_cr
     mean_x=st.floats(60.0, 140.0),
     sd_x=st.floats(3.0, 30.0),
 )
+@example(
+    silent=[(80.0, 60.0)], mean_x=60.0, sd_x=3.0
+)  # its circle meets the reporting one's on the line
 def test_region_truncation_along_one_row_is_exact_under_overlapping_silent_discs(
     silent, mean_x, sd_x
 ):
-    """A component of negligible height (sd_y 1e-6 m) is cut along the one line y = 100:
+    """A component of negligible height (sd_y 1e-9 m) is cut along the line y = 100:
     within a reporting disc, less up to five silent discs' chords that overlap as they
     will. Mass and mean equal a 1 mm grid's along the line to within the grid's own error,
     one cell's mass at each point where the indicator changes (the +-9 sd box keeps a
     component the region does not cut from being returned whole with mass beyond it)."""
     reporting, silent = np.array([[100.0, 100.0]]), np.array(silent)
-    mean, variance = np.array([[mean_x, 100.0]]), np.array([[sd_x**2, 1e-12]])
+    mean, variance = np.array([[mean_x, 100.0]]), np.array([[sd_x**2, 1e-18]])
     log_mass, means, _ = region_truncation(
         mean, variance, reporting, silent, 50.0, 1000.0, half_width=9.0
     )
@@ -845,6 +848,17 @@ def test_region_truncation_along_one_row_is_exact_under_overlapping_silent_discs
     if mass > 1e-3:
         centre = density[inside] @ x[inside] / mass
         assert abs(means[0, 0] - centre) <= bound * 9 * sd_x / mass
+
+
+def test_region_truncation_cuts_at_the_area_s_edges():
+    """Inside a reporting disc that holds the whole area, a component centred on an edge of
+    the area keeps half its mass (the rows and the box are symmetric about the edge), and
+    one beyond the area none."""
+    reporting = np.array([[500.0, 500.0]])
+    means = np.array([[0.0, 500.0], [1000.0, 500.0], [500.0, 0.0], [500.0, 1000.0], [-30.0, 500.0]])
+    log_mass, _, _ = region_truncation(means, np.full((5, 2), 4.0), reporting, [], 1e7, 1000.0)
+    np.testing.assert_allclose(np.exp(log_mass[:4]), 0.5, rtol=1e-12)
+    assert log_mass[4] == -np.inf
 
 
 def test_region_truncation_keeps_a_component_inside_and_zeroes_one_outside():
