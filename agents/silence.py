@@ -188,64 +188,46 @@ cells spanning +-``half_width`` standard deviations around a component's mean (a
 0.2 standard deviations); along each row the integral over x is exact."""
 
 
-def _region_excludes_nothing(
+def _box_against_region(
     low: np.ndarray,
     high: np.ndarray,
     reporting_positions: np.ndarray,
     silent_positions: np.ndarray,
     sensing_range: float,
     area: float,
-) -> np.ndarray:
-    """(C,) True where the box [``low``, ``high``] (C, 2) lies wholly in the region of
-    :func:`reporting_region`: inside the area, inside every reporting disc (a disc is convex,
-    so its corners suffice) and apart from every silent disc (its nearest point is farther
-    than the range)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """For boxes [``low``, ``high``] (C, 2), ``(inside, outside)`` (C,) each: True where the
+    box lies wholly in the region of :func:`reporting_region` (inside the area, its farthest
+    corner inside every reporting disc, its nearest point outside every silent disc), and
+    where it has no point in it (beyond the area, its nearest point outside a reporting disc,
+    or its farthest corner inside a silent disc). A disc is convex, so the corners suffice."""
+    radius2 = sensing_range**2
     inside = np.all((low >= 0.0) & (high <= area), axis=1)
-    corners = np.stack(
-        [
-            low,
-            np.column_stack([low[:, 0], high[:, 1]]),
-            np.column_stack([high[:, 0], low[:, 1]]),
-            high,
-        ],
-        axis=1,
-    )  # (C, 4, 2)
-    for sensor in reporting_positions:
-        inside &= np.all(np.sum((corners - sensor) ** 2, axis=2) <= sensing_range**2, axis=1)
-    if len(silent_positions):
-        distance = _box_distance2(low, high, silent_positions)
-        inside &= np.all(distance > sensing_range**2, axis=1)
-    return inside
-
-
-def _region_misses(
-    low: np.ndarray,
-    high: np.ndarray,
-    reporting_positions: np.ndarray,
-    silent_positions: np.ndarray,
-    sensing_range: float,
-    area: float,
-) -> np.ndarray:
-    """(C,) True where the box [``low``, ``high``] (C, 2) has no point in the region of
-    :func:`reporting_region`: it lies beyond the area, apart from a reporting disc, or
-    wholly inside a silent one (a disc is convex, so its corners suffice)."""
-    misses = np.any((high < 0.0) | (low > area), axis=1)
+    outside = np.any((high < 0.0) | (low > area), axis=1)
     if len(reporting_positions):
-        distance = _box_distance2(low, high, reporting_positions)
-        misses |= np.any(distance > sensing_range**2, axis=1)
+        farthest = _box_distance2(low, high, reporting_positions, farthest=True)
+        inside &= np.all(farthest <= radius2, axis=1)
+        outside |= np.any(_box_distance2(low, high, reporting_positions) > radius2, axis=1)
     if len(silent_positions):
-        farthest = np.maximum(
-            np.abs(silent_positions[None, :, :] - low[:, None, :]),
-            np.abs(silent_positions[None, :, :] - high[:, None, :]),
-        )  # (C, k, 2), the farthest corner's offsets
-        misses |= np.any(np.sum(farthest**2, axis=2) <= sensing_range**2, axis=1)
-    return misses
+        inside &= np.all(_box_distance2(low, high, silent_positions) > radius2, axis=1)
+        farthest = _box_distance2(low, high, silent_positions, farthest=True)
+        outside |= np.any(farthest <= radius2, axis=1)
+    return inside, outside
 
 
-def _box_distance2(low: np.ndarray, high: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(C, k) squared distance from each box [``low``, ``high``] (C, 2) to each point (k, 2)."""
-    nearest = np.clip(points[None, :, :], low[:, None, :], high[:, None, :])
-    return np.sum((nearest - points[None, :, :]) ** 2, axis=2)
+def _box_distance2(
+    low: np.ndarray, high: np.ndarray, points: np.ndarray, farthest: bool = False
+) -> np.ndarray:
+    """(C, k) squared distance from each box [``low``, ``high``] (C, 2) to each point (k, 2):
+    to the box's nearest point, or with ``farthest`` to its farthest corner."""
+    if farthest:
+        offsets = np.maximum(
+            np.abs(points[None, :, :] - low[:, None, :]),
+            np.abs(points[None, :, :] - high[:, None, :]),
+        )
+    else:
+        offsets = np.clip(points[None, :, :], low[:, None, :], high[:, None, :]) - points
+    return np.sum(offsets**2, axis=2)
 
 
 def _discs_reaching(
@@ -366,10 +348,8 @@ def region_truncation(
         for start in range(0, len(means), chunk)
     ]
     sets = (reporting_positions, silent_positions, sensing_range, area)
-    untouched = np.concatenate(
-        [_region_excludes_nothing(*box, *sets) for box in boxes] or [np.zeros(0, bool)]
-    )
-    missed = np.concatenate([_region_misses(*box, *sets) for box in boxes] or [np.zeros(0, bool)])
+    tests = [_box_against_region(*box, *sets) for box in boxes] or [(np.zeros(0, bool),) * 2]
+    untouched, missed = (np.concatenate(parts) for parts in zip(*tests))
     log_mass = np.where(missed, -np.inf, 0.0)
     means_out, variances_out = means.copy(), variances.copy()
     cut = np.flatnonzero(~untouched & ~missed)
