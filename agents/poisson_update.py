@@ -33,8 +33,10 @@ Region = tuple[np.ndarray, np.ndarray, float, float]
 
 LOG_MASS_BEYOND_QUADRATURE = float(np.log1p(-((1.0 - 2.0 * special.ndtr(-4.0)) ** 2)))
 """The log mass given to a prior's components when none of them has mass in the region on
-a row of its box (:func:`agents.silence.region_truncation`): the mass outside a component's +-4
-standard-deviation box, 1 - (1 - 2 Phi(-4))^2 = 1.27e-4, which bounds theirs there."""
+a row of its box (:func:`agents.silence.region_truncation`): the mass outside a component's
++-4 standard-deviation box, 1 - (1 - 2 Phi(-4))^2 = 1.27e-4, which bounds theirs there
+unless the region slips between the rows (a sliver thinner than the rows' spacing inside
+the reporting discs' y extent)."""
 
 
 @dataclass(frozen=True)

@@ -184,8 +184,9 @@ REGION_CHUNK = 2**20
 
 REGION_QUADRATURE = {"half_width": 4.0, "points": 40}
 """The rows of :func:`region_truncation`: ``points`` values of y at the midpoints of equal
-cells spanning +-``half_width`` standard deviations around a component's mean (a spacing of
-0.2 standard deviations); along each row the integral over x is exact."""
+cells spanning the part of a component's +-``half_width`` standard-deviation box where the
+region can lie (at most 0.2 standard deviations apart); along each row the integral over x
+is exact."""
 
 
 def _box_against_region(
@@ -259,7 +260,7 @@ def _normal_interval_moments(lower: np.ndarray, upper: np.ndarray):
     return mass, first, second
 
 
-def _row_intervals(
+def _row_pieces(
     rows: np.ndarray,
     left: np.ndarray,
     right: np.ndarray,
@@ -267,13 +268,12 @@ def _row_intervals(
     silent_positions: np.ndarray,
     sensing_range: float,
     area: float,
-):
+) -> tuple[np.ndarray, np.ndarray]:
     """Along each horizontal line y = ``rows`` (any shape S) from x = ``left`` to ``right``
-    (broadcast to S), the region of :func:`reporting_region` as an interval [``lower``,
-    ``upper``] of x (cut by the area and every reporting disc's chord) less the silent
-    discs' chords, returned as ``(lower, upper, holes_lower, holes_upper)``: the holes
-    (S + (k,)) are disjoint pieces of [``lower``, ``upper``], empty ones of zero width. An
-    empty row has ``lower`` = ``upper``."""
+    (broadcast to S), the region of :func:`reporting_region` as disjoint intervals of x:
+    ``(starts, ends)`` (S + (k + 1,)), the gaps that the silent discs' k chords leave in the
+    one interval inside the area and every reporting disc's chord; empty pieces have zero
+    width. Each piece is integrated directly, so a row the chords cover adds exactly 0."""
     lower = np.broadcast_to(np.maximum(left, 0.0), rows.shape)
     upper = np.where((rows >= 0.0) & (rows <= area), np.minimum(right, area), lower)
     for x, y in reporting_positions:
@@ -281,22 +281,21 @@ def _row_intervals(
         half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
         lower = np.maximum(lower, x - half_chord)
         upper = np.where(half_chord2 >= 0.0, np.minimum(upper, x + half_chord), lower)
-    upper = np.maximum(upper, lower)
+    upper = np.maximum(upper, lower)[..., None]
+    lower = lower[..., None]
     half_chord2 = sensing_range**2 - (rows[..., None] - silent_positions[:, 1]) ** 2
     half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
-    holes_lower = np.clip(silent_positions[:, 0] - half_chord, lower[..., None], upper[..., None])
-    holes_upper = np.clip(silent_positions[:, 0] + half_chord, lower[..., None], upper[..., None])
-    holes_upper = np.where(half_chord2 > 0.0, holes_upper, holes_lower)
-    # the union of the chords as disjoint pieces: sorted by start, each piece begins past
-    # the farthest end of those before it
+    meets = half_chord2 > 0.0
+    holes_lower = np.where(meets, np.clip(silent_positions[:, 0] - half_chord, lower, upper), lower)
+    holes_upper = np.where(meets, np.clip(silent_positions[:, 0] + half_chord, lower, upper), lower)
+    # sorted by start, the free piece before each chord runs from the farthest end of the
+    # chords before it to its start
     order = np.argsort(holes_lower, axis=-1)
     holes_lower = np.take_along_axis(holes_lower, order, axis=-1)
-    holes_upper = np.take_along_axis(holes_upper, order, axis=-1)
-    reach = np.maximum.accumulate(holes_upper, axis=-1)
-    before = np.concatenate([lower[..., None], reach[..., :-1]], axis=-1)
-    holes_lower = np.maximum(holes_lower, before)
-    holes_upper = np.maximum(holes_upper, holes_lower)
-    return lower, upper, holes_lower, holes_upper
+    reach = np.maximum.accumulate(np.take_along_axis(holes_upper, order, axis=-1), axis=-1)
+    starts = np.concatenate([lower, reach], axis=-1)
+    ends = np.maximum(np.concatenate([holes_lower, upper], axis=-1), starts)
+    return starts, ends
 
 
 def region_truncation(
@@ -316,16 +315,19 @@ def region_truncation(
     likelihood of which sensors report is that region's indicator, so this is the exact
     update of a Gaussian by it.
 
-    A component whose +-``half_width`` standard-deviation box lies wholly in the region is
-    returned as it is, with mass 1 (what lies beyond the box is below 1.3e-4 of it at 4).
-    Otherwise the integral over y is a midpoint rule on ``points`` rows across the box
-    (:data:`REGION_QUADRATURE`), and the integral over x along each row, within the box, is
-    exact: the region meets a horizontal line in one interval (the reporting discs' chords
-    and the area) less the silent discs' chords, over which a normal's moments are
-    differences of Phi and phi. Each moment is divided by the same integral over the whole
-    box, so that a component the region does not cut keeps its moments, and a component's
-    numbers depend on nothing beyond its box. A component the region leaves no mass on any
-    row gets mass 0 (log -inf) and its moments unchanged."""
+    ``variances`` must be positive. A component whose +-``half_width`` standard-deviation box
+    lies wholly in the region is returned as it is, with mass 1 (what lies beyond the box is
+    below 1.3e-4 of it at 4); one whose box has no point in it gets mass 0 (log -inf) and
+    its moments unchanged. Otherwise the integral over y is a rule on ``points`` rows
+    (:data:`REGION_QUADRATURE`) at the midpoints of equal cells spanning the box's y range
+    inside the area and every reporting disc's y extent, each row weighted by the normal's
+    exact mass and moments over its cell; along each row the integral over x, within the
+    box, is exact: the region meets a horizontal line in one interval (the reporting discs'
+    chords and the area) less the silent discs' chords, and over each piece a normal's
+    moments are differences of Phi and phi. Each moment is divided by the same integral over
+    the whole box, so that a component the region does not cut keeps its moments; a
+    component's numbers depend on nothing beyond its box, up to rounding. A component the
+    region leaves no mass on any row gets mass 0 and its moments unchanged."""
     means = np.asarray(means, dtype=float)
     variances = np.asarray(variances, dtype=float)
     reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
@@ -381,39 +383,42 @@ def _cut_to_region(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rows' quadrature of :func:`region_truncation` for components (means and standard
     deviations (K, 2)) the region cuts, ``silent_positions`` the discs that reach their
-    boxes."""
-    offsets = (np.arange(points) + 0.5) * (2.0 * half_width / points) - half_width
-    row_weight = np.exp(-0.5 * offsets**2)  # (P,), the standard normal up to a constant
+    boxes. The rows are the midpoints of ``points`` equal cells spanning the box's y range
+    where the region can lie (inside the area and every reporting disc's y extent); each
+    cell weighs its row by the normal's exact mass and moments over the cell."""
     box_mass, _, box_second = _normal_interval_moments(np.array(-half_width), half_width)
-    full_mass = row_weight.sum() * box_mass
-    full_second = np.array([box_second / box_mass, row_weight @ offsets**2 / row_weight.sum()])
-    centre, scale = means[:, 0, None], sd[:, 0, None]
-    lower, upper, holes_lower, holes_upper = _row_intervals(
-        means[:, 1, None] + sd[:, 1, None] * offsets,  # (K, P)
-        centre - half_width * scale,
-        centre + half_width * scale,
+    low_y, high_y = 0.0, area
+    if len(reporting_positions):
+        low_y = max(low_y, float(np.max(reporting_positions[:, 1])) - sensing_range)
+        high_y = min(high_y, float(np.min(reporting_positions[:, 1])) + sensing_range)
+    first_edge = np.clip((low_y - means[:, 1]) / sd[:, 1], -half_width, half_width)
+    last_edge = np.clip((high_y - means[:, 1]) / sd[:, 1], first_edge, half_width)
+    edges = first_edge[:, None] + (last_edge - first_edge)[:, None] * (
+        np.arange(points + 1) / points
+    )  # (K, P + 1), in standard deviations
+    cells = np.stack(_normal_interval_moments(edges[:, :-1], edges[:, 1:]))  # (3, K, P)
+    centre, scale = means[:, 0, None, None], sd[:, 0, None, None]
+    starts, ends = _row_pieces(
+        means[:, 1, None] + sd[:, 1, None] * (edges[:, :-1] + edges[:, 1:]) / 2,  # (K, P)
+        (centre - half_width * scale)[..., 0],
+        (centre + half_width * scale)[..., 0],
         reporting_positions,
         silent_positions,
         sensing_range,
         area,
     )
-    row = np.stack(_normal_interval_moments((lower - centre) / scale, (upper - centre) / scale))
-    holes = _normal_interval_moments(
-        (holes_lower - centre[..., None]) / scale[..., None],
-        (holes_upper - centre[..., None]) / scale[..., None],
-    )
-    row -= np.stack([h.sum(axis=-1) for h in holes])  # (3, K, P): x mass, first, second
-    row *= row[0] > 0.0  # a row whose chords leave nothing (or rounding below it) adds none
-    weights = row[0] * row_weight  # (K, P), each row's share of the mass
-    mass = weights.sum(axis=1)
+    pieces = _normal_interval_moments((starts - centre) / scale, (ends - centre) / scale)
+    rows = np.stack([piece.sum(axis=-1) for piece in pieces])  # (3, K, P): x mass, moments
+    mass = np.sum(cells[0] * rows[0], axis=1)
     some = mass > 0
-    safe = np.where(some, mass, 1.0)
-    first = np.column_stack([row[1] @ row_weight, weights @ offsets]) / safe[:, None]
-    second = np.column_stack([row[2] @ row_weight, weights @ offsets**2]) / safe[:, None]
-    second = (second - first**2) / full_second
-    log_mass = np.where(some, np.log(safe / full_mass), -np.inf)
+    safe = np.where(some, mass, 1.0)[:, None]
+    first = np.column_stack([np.sum(cells[0] * rows[1], 1), np.sum(cells[1] * rows[0], 1)])
+    second = np.column_stack([np.sum(cells[0] * rows[2], 1), np.sum(cells[2] * rows[0], 1)])
+    first, second = first / safe, second / safe
+    variance_ratio = np.maximum(second - first**2, 0.0) / (box_second / box_mass)
+    log_mass = np.where(some, np.log(safe[:, 0] / box_mass**2), -np.inf)
     means_out = np.where(some[:, None], means + sd * first, means)
-    variances_out = np.where(some[:, None], sd**2 * np.maximum(second, 0.0), sd**2)
+    variances_out = np.where(some[:, None], sd**2 * variance_ratio, sd**2)
     return log_mass, means_out, variances_out
 
 
