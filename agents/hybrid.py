@@ -167,15 +167,18 @@ the per-sensor model uses it otherwise.
 Chosen on training seeds 1000-1023 (S1-S4, clutter 1 and 5, fixed and random paths,
 sigma_z 1; ``python scripts/model_study.py --seeds 24 --candidates
 ss-rbcm-silence-1000-turn-q5 hybrid-no-region hybrid-region --paired-against
-ss-rbcm-silence-1000-turn-q5``, 4 min): against ``dgpt-rbcm``, with the region -0.24 +- 0.16
+ss-rbcm-silence-1000-turn-q5``, 4 min): against ``dgpt-rbcm``, with the region -0.22 +- 0.16
 / -0.26 +- 0.18 m RMSE, paired, on the fixed / random paths; without it -0.04 +- 0.16 /
 -0.14 +- 0.19 m. 3-sigma coverage on detected steps 99.69 % either way (``dgpt-rbcm``
 99.77 %). At clutter 5 the hybrid with the region had the lower mean RMSE than
-``dgpt-rbcm`` in all four scenarios on both path modes (reference paths S1-S4: 8.74, 4.91,
-7.94, 6.57 m against 9.13, 5.40, 8.43, 6.73 m; without the region 9.26, 5.49, 8.05, 6.61 m).
+``dgpt-rbcm`` in all four scenarios on both path modes (reference paths S1-S4: 8.74, 4.93,
+7.97, 6.67 m against 9.13, 5.40, 8.43, 6.73 m; without the region 9.26, 5.49, 8.05, 6.61 m).
+``hybrid-trend`` gained -1.29 +- 0.28 / -2.14 +- 0.39 m with it (candidates
+``hybrid-trend-region`` / ``hybrid-trend-no-region``, with a first version of the rows).
 It costs about 1.4 times the hybrid's step (reference paths, clutter 5, one episode at a
-time: 2.6-3.0 ms without, 3.7-4.2 ms with), the quadrature of
-:func:`agents.silence.region_truncation` being exact along each row of a component's box."""
+time, mean steps over seeds 1000-1003: 2.6-2.7 ms without, 3.4-3.8 ms with), the quadrature
+of :func:`agents.silence.region_truncation` being exact along each row of a component's
+box."""
 
 
 class HybridFilter(TrackerBase):
