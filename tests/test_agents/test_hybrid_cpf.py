@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from agents.hybrid import HybridFilter, paper_posterior
 from agents.likelihood import PoissonLikelihood
 from agents.poisson_update import (
+    LOG_MASS_BEYOND_QUADRATURE,
     GaussianSumPosterior,
     exact_posterior,
     gaussian_sums,
@@ -335,6 +336,28 @@ def test_gaussian_sums_with_the_region_equal_the_enumeration_cut_to_it(
         np.testing.assert_allclose(result.mean[prior], mean, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(result.var[prior], var, rtol=1e-7)
         np.testing.assert_allclose(result.log_evidence[prior], log_evidence, rtol=1e-9)
+
+
+def test_a_prior_none_of_whose_components_reaches_the_region_keeps_them_at_the_bound():
+    """Two priors under the same points and region: one beside the reporting disc, one 40 m
+    away, none of whose components' +-4 sd boxes meets the disc. The far prior keeps its
+    posterior moments without the region, and its log evidence is theirs plus
+    LOG_MASS_BEYOND_QUADRATURE (every component gets the bound on the mass beyond its box,
+    so the weights keep their ratios); the near one is cut, so it moves."""
+    means = np.array([[50.0, 50.0], [90.0, 90.0]])
+    variances = np.array([[25.0, 25.0], [1.0, 1.0]])
+    points = np.array([[52.0, 49.0], [47.0, 55.0]])
+    sensors = np.array([0, 0])
+    region = (np.array([[50.0, 50.0]]), np.array([[60.0, 60.0]]), 10.0, 100.0)
+    common = dict(prune_tolerance=0.0, max_components=512, sensors=sensors)
+    cut = gaussian_sums(means, variances, points, LIKELIHOOD, region=region, **common)
+    plain = gaussian_sums(means, variances, points, LIKELIHOOD, **common)
+    np.testing.assert_allclose(cut.mean[1], plain.mean[1], rtol=1e-12)
+    np.testing.assert_allclose(cut.var[1], plain.var[1], rtol=1e-12)
+    np.testing.assert_allclose(
+        cut.log_evidence[1], plain.log_evidence[1] + LOG_MASS_BEYOND_QUADRATURE, rtol=1e-12
+    )
+    assert cut.log_evidence[0] < plain.log_evidence[0]
 
 
 def test_a_wide_prior_component_takes_points_that_agree_far_from_the_narrow_one():
