@@ -116,6 +116,30 @@ def reporting_and_silent(
     return sensor_positions[reporting], sensor_positions[silent]
 
 
+def _silent_meeting_reporting(
+    reporting_positions: np.ndarray, silent_positions: np.ndarray, sensing_range: float
+) -> np.ndarray:
+    """The sensors of ``silent_positions`` whose disc can meet the region of
+    :func:`reporting_region`: that region lies in the first reporting disc, which a silent
+    disc meets only if its sensor is within 2 R (all of them without reporting sensors)."""
+    silent_positions = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
+    if not len(reporting_positions):
+        return silent_positions
+    gap = np.sum((silent_positions - reporting_positions[0]) ** 2, axis=1)
+    return silent_positions[gap <= (2 * sensing_range) ** 2]
+
+
+def _reporting_box(
+    reporting_positions: np.ndarray, sensing_range: float, area: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``(low, high)`` ((2,) each) that holds the region of :func:`reporting_region`:
+    the area cut by every reporting disc's bounding square."""
+    if not len(reporting_positions):
+        return np.zeros(2), np.full(2, float(area))
+    low = np.maximum(np.max(reporting_positions, axis=0) - sensing_range, 0.0)
+    return low, np.minimum(np.min(reporting_positions, axis=0) + sensing_range, area)
+
+
 def reporting_region(
     positions: np.ndarray,
     reporting_positions: np.ndarray,
@@ -132,10 +156,8 @@ def reporting_region(
     reporting_positions = np.asarray(reporting_positions, dtype=float)
     offsets = positions[:, None, :] - reporting_positions[None, :, :]
     inside = np.all(np.einsum("nki,nki->nk", offsets, offsets) <= sensing_range**2, axis=1)
-    # a silent disc meets the first reporting one only if its sensor is within 2 R of it
-    silent = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
-    near = np.sum((silent - reporting_positions[0]) ** 2, axis=1) <= (2 * sensing_range) ** 2
-    inside[inside] = silent_region(positions[inside], silent[near], sensing_range, area)
+    silent = _silent_meeting_reporting(reporting_positions, silent_positions, sensing_range)
+    inside[inside] = silent_region(positions[inside], silent, sensing_range, area)
     return inside
 
 
@@ -158,8 +180,7 @@ def region_cells(
     deterministic quadrature). Returns ``weights`` (K,), ``means`` (K, 2) and ``variances``
     (K, 2); K = 0 when no lattice point lies in the region."""
     reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
-    low = np.maximum(np.max(reporting_positions, axis=0) - sensing_range, 0.0)
-    high = np.minimum(np.min(reporting_positions, axis=0) + sensing_range, area)
+    low, high = _reporting_box(reporting_positions, sensing_range, area)
     spacing = cell / resolution
     axes = [
         np.arange(low[a] + spacing / 2, max(high[a], low[a] + spacing), spacing) for a in (0, 1)
@@ -331,12 +352,9 @@ def region_truncation(
     means = np.asarray(means, dtype=float)
     variances = np.asarray(variances, dtype=float)
     reporting_positions = np.asarray(reporting_positions, dtype=float).reshape(-1, 2)
-    silent_positions = np.asarray(silent_positions, dtype=float).reshape(-1, 2)
-    if len(reporting_positions):
-        # the region lies in the first reporting disc: only a silent disc within 2 R of it
-        # can take mass from it
-        gap = np.sum((silent_positions - reporting_positions[0]) ** 2, axis=1)
-        silent_positions = silent_positions[gap <= (2 * sensing_range) ** 2]
+    silent_positions = _silent_meeting_reporting(
+        reporting_positions, silent_positions, sensing_range
+    )
     sd = np.sqrt(variances)
     low, high = means - half_width * sd, means + half_width * sd
     silent_positions = _discs_reaching(low, high, silent_positions, sensing_range)
@@ -387,12 +405,9 @@ def _cut_to_region(
     where the region can lie (inside the area and every reporting disc's y extent); each
     cell weighs its row by the normal's exact mass and moments over the cell."""
     box_mass, _, box_second = _normal_interval_moments(np.array(-half_width), half_width)
-    low_y, high_y = 0.0, area
-    if len(reporting_positions):
-        low_y = max(low_y, float(np.max(reporting_positions[:, 1])) - sensing_range)
-        high_y = min(high_y, float(np.min(reporting_positions[:, 1])) + sensing_range)
-    first_edge = np.clip((low_y - means[:, 1]) / sd[:, 1], -half_width, half_width)
-    last_edge = np.clip((high_y - means[:, 1]) / sd[:, 1], first_edge, half_width)
+    low, high = _reporting_box(reporting_positions, sensing_range, area)
+    first_edge = np.clip((low[1] - means[:, 1]) / sd[:, 1], -half_width, half_width)
+    last_edge = np.clip((high[1] - means[:, 1]) / sd[:, 1], first_edge, half_width)
     edges = first_edge[:, None] + (last_edge - first_edge)[:, None] * (
         np.arange(points + 1) / points
     )  # (K, P + 1), in standard deviations

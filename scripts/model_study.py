@@ -44,6 +44,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from agents.registration import SEARCHING  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
 from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_units  # noqa: E402
 
@@ -348,12 +349,7 @@ CANDIDATES = {
     **{
         f"hybrid-{'region' if region else 'no-region'}": (
             "agents.hybrid:HybridFilter",
-            {
-                "silence_particles": 1000,
-                "search_particles": 2000,
-                "gap_birth_probability": 0.003,
-                "reporting_region": region,
-            },
+            {**SEARCHING, "reporting_region": region},
         )
         for region in (False, True)
     },

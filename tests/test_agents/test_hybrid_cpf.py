@@ -1053,15 +1053,13 @@ def test_with_the_reporting_region_the_hybrid_cuts_its_posterior_to_where_the_re
     spec = info["problem_spec"]
     tracker.reset(spec, seed=3)
     likelihood = PoissonLikelihood.from_spec(spec)
-    positions = np.asarray(spec.sensor_positions)
     checked = moved = 0
     for _ in range(40):
         estimate = tracker.update(obs)
         prior, predictions, measurements, sensors, _ = tracker.seen_[-1]
         if prior is not None and predictions is not None and len(measurements):
             log_priors, means, covs, _ = predictions
-            reporting = np.isin(np.arange(len(positions)), sensors)
-            region = (positions[reporting], positions[~reporting], spec.sensing_range, spec.area)
+            region = which_sensors_report(spec, sensors)
             expected, without = (
                 mixture_posterior(
                     log_priors,
