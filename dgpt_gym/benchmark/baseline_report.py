@@ -1,5 +1,6 @@
 """Tables of the paper's trackers against the field's standard trackers and the clairvoyant
-floor, and of every tracker's consistency (NEES, sigma coverage, track loss).
+floor, of every tracker's consistency (NEES, sigma coverage, track loss), and of the
+calibration goals per cell.
 
 Inputs are per-cell summaries (:func:`dgpt_gym.benchmark.sweep.summarize_store` with
 :func:`dgpt_gym.benchmark.episodes.add_floor_ratios` applied); metric names are those of
@@ -14,9 +15,12 @@ import numpy as np
 
 from dgpt_gym.benchmark.episodes import interval_half_width
 from dgpt_gym.benchmark.metrics import NOMINAL_ANEES, NOMINAL_COVERAGE, NOMINAL_MEDIAN_NEES
-from dgpt_gym.benchmark.protocol import PAPER_GP_TRACKERS
+from dgpt_gym.benchmark.protocol import DEFAULT_GP_TRACKERS, PAPER_GP_TRACKERS
 
 __all__ = [
+    "CALIBRATION_GOALS",
+    "CALIBRATION_TRACKERS",
+    "calibration_markdown",
     "COMPARISON_TRACKERS",
     "FLOOR",
     "PAIRED_REFERENCE",
@@ -35,6 +39,23 @@ COMPARISON_TRACKERS = (
     + ("hybrid", "hybrid-trend", "hybrid-paper", "cpf")
 )
 """Row order of the comparison; trackers of the sweep not listed here follow."""
+
+
+CALIBRATION_TRACKERS = DEFAULT_GP_TRACKERS + ("hybrid",)
+"""The trackers whose uncertainty the calibration goals concern: the default GP trackers and
+the exact hybrid."""
+
+CALIBRATION_GOALS = {
+    "coverage_3sigma": 0.99,
+    "nees_median": (0.7, 2.8),
+    "ucb_coverage": 0.997,
+    "ucb_half_width_to_rmse": 4.0,
+}
+"""Per cell, on steps where some sensor senses the target: 3-sigma coverage of at least 99 %
+per axis (nominal 99.73 %) and a median 2-D NEES within [0.7, 2.8] (nominal 1.39); for
+DGPT-RBCM's UCB, coverage of at least 99.7 % with a mean half-width of at most 4 times the
+RMSE. A cell whose mean misses the coverage goal may still be consistent with it: the
+table gives the interval over runs."""
 
 
 def _value(row: dict, key: str) -> float:
@@ -175,4 +196,101 @@ def paired_markdown(
             text = f"{mean:+.2f} ± {half:.2f}"
             row.append(f"**{text}**" if abs(mean) > half else text)
         lines.append(f"| {tracker} | " + " | ".join(row) + " |")
+    return "\n".join(lines + [""])
+
+
+def _coverage_cell(row: dict, axis: str) -> tuple[str, bool, bool]:
+    """``row``'s 3-sigma coverage on detected steps along ``axis`` as "mean ± interval" (%),
+    whether the mean is below the goal, and whether the whole interval is."""
+    goal = CALIBRATION_GOALS["coverage_3sigma"]
+    mean = _value(row, f"coverage_3sigma_{axis}_detected")
+    half = _value(row, f"coverage_3sigma_{axis}_detected_ci95")
+    text = f"{100 * mean:.2f}" + ("" if math.isnan(half) else f" ± {100 * half:.2f}")
+    below = mean < goal
+    return text, below, below and not math.isnan(half) and mean + half < goal
+
+
+def calibration_markdown(summaries: list[dict], trackers=CALIBRATION_TRACKERS) -> str:
+    """The calibration goals (:data:`CALIBRATION_GOALS`) per cell of ``trackers``: each
+    cell's 3-sigma coverage per axis on detected steps with its 95 % interval over runs,
+    then per tracker how many cells miss each goal."""
+    rows = [row for row in summaries if row["tracker"] in trackers]
+    present = [t for t in trackers if any(row["tracker"] == t for row in rows)]
+    if not present:
+        return ""
+    by_key = {
+        (row["tracker"], row["scenario"], row["noise_std"], row["clutter_rate"]): row
+        for row in rows
+    }
+    cells = sorted({key[1:] for key in by_key})
+    low, high = CALIBRATION_GOALS["nees_median"]
+    coverage_goal = 100 * CALIBRATION_GOALS["coverage_3sigma"]
+    lines = [
+        f"3-sigma coverage on detected steps (some sensor senses the target), X / Y %: the mean"
+        f" over runs ± its 95 % interval. Goal: at least {coverage_goal:g} % per axis in every"
+        f" cell (nominal {100 * NOMINAL_COVERAGE[3]:.2f} %). **Bold**: the mean is below the"
+        " goal; marked ↓: the whole interval is.",
+        "",
+        "| scenario | sigma_z | clutter | " + " | ".join(present) + " |",
+        "|---|---|---|" + "---|" * len(present),
+    ]
+    tallies = {tracker: {"cells": 0, "below": 0, "surely_below": 0} for tracker in present}
+    for scenario, noise_std, clutter in cells:
+        entries = []
+        for tracker in present:
+            row = by_key.get((tracker, scenario, noise_std, clutter))
+            if row is None:
+                entries.append("-")
+                continue
+            tally = tallies[tracker]
+            tally["cells"] += 1
+            axes = [_coverage_cell(row, axis) for axis in "xy"]
+            tally["below"] += any(below for _, below, _ in axes)
+            tally["surely_below"] += any(surely for _, _, surely in axes)
+            entries.append(
+                " / ".join(
+                    f"**{text}**{' ↓' if surely else ''}" if below else text
+                    for text, below, surely in axes
+                )
+            )
+        lines.append(f"| {scenario} | {noise_std:g} | {clutter:g} | " + " | ".join(entries) + " |")
+    lines += [
+        "",
+        f"Per tracker, over its cells. Median NEES: the mean over runs of each run's median 2-D"
+        f" NEES on detected steps, goal [{low:g}, {high:g}] (nominal {NOMINAL_MEDIAN_NEES:.2f})."
+        " UCB: its coverage over all steps, goal at least"
+        f" {100 * CALIBRATION_GOALS['ucb_coverage']:g} % per axis, and its mean half-width over"
+        f" the RMSE per axis, goal at most {CALIBRATION_GOALS['ucb_half_width_to_rmse']:g}"
+        " (DGPT-RBCM's goals; shown for all): the mean over cells and axes, and in brackets"
+        " the worst cell and axis.",
+        "",
+        "| tracker | cells | 3-sigma below goal (interval wholly below) | median NEES, range"
+        " | median NEES outside goal | UCB coverage % | UCB half-width / RMSE |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for tracker in present:
+        mine = [row for row in rows if row["tracker"] == tracker]
+        nees = np.array([_value(row, "nees_median_detected") for row in mine])
+        ucb_coverage = np.array(
+            [_value(row, f"ucb_coverage_{axis}") for row in mine for axis in "xy"]
+        )
+        ratios = np.array(
+            [
+                _value(row, f"ucb_width_{axis}") / 2.0 / _value(row, f"rmse_{axis}")
+                for row in mine
+                for axis in "xy"
+            ]
+        )
+        tally = tallies[tracker]
+        ucb = (
+            "- | -"
+            if np.all(np.isnan(ucb_coverage))
+            else f"{100 * np.nanmean(ucb_coverage):.2f} ({100 * np.nanmin(ucb_coverage):.2f}) | "
+            f"{np.nanmean(ratios):.2f} ({np.nanmax(ratios):.2f})"
+        )
+        lines.append(
+            f"| {tracker} | {tally['cells']} | {tally['below']} ({tally['surely_below']}) | "
+            f"{np.nanmin(nees):.2f}-{np.nanmax(nees):.2f} | "
+            f"{int(np.sum((nees < low) | (nees > high)))} | {ucb} |"
+        )
     return "\n".join(lines + [""])

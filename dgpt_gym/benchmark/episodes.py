@@ -261,7 +261,13 @@ def run_monte_carlo(
     return rows
 
 
-INTERVAL_KEYS = ("nrmse_x", "nrmse_y", "rmse_2d")
+INTERVAL_KEYS = (
+    "nrmse_x",
+    "nrmse_y",
+    "rmse_2d",
+    "coverage_3sigma_x_detected",
+    "coverage_3sigma_y_detected",
+)
 """Metrics whose 95 % interval over runs :func:`summarize_runs` reports (``<key>_ci95``)."""
 
 

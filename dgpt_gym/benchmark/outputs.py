@@ -7,7 +7,7 @@ writes, to the report folder, what the sweep's runs allow:
 |---|---|---|
 | ``results.md`` | headline against the paper, NRMSE per tracker and scenario, failures, timings, links | |
 | ``results_cells.csv`` | every cell's summary (means over runs, STD of RMSE, ratio to the floor) | |
-| ``results_baselines.md`` | NRMSE against the standard trackers and the clairvoyant floor; NEES, coverage, track loss | |
+| ``results_baselines.md`` | NRMSE against the standard trackers and the clairvoyant floor; NEES, coverage, track loss; the calibration goals per cell | |
 | ``results_tables.md`` (+ ``.csv``) | NRMSE beside the paper's, laid out like the paper | Tables II-IX |
 | ``results_hybrid.md``, ``figures/hybrid_comparison.png`` | NRMSE and STD of RMSE bars at sigma_z = 1, clutter 5 | Fig. 8 |
 | ``results_uncertainty.md``, ``figures/ucb_vs_ci.png`` | UCB and 3-sigma coverage and width; one S1 run | Figs. 4-7, Sec. VII-G |
@@ -65,7 +65,8 @@ def baselines_markdown(
 ) -> str:
     """``results_baselines.md``: every tracker against the standard trackers and the
     clairvoyant floor, per noise level (with the paired comparison to DGPT-RBCM when the
-    per-run values are given), and every tracker's consistency."""
+    per-run values are given), every tracker's consistency, and the calibration goals per cell
+    (:func:`dgpt_gym.benchmark.baseline_report.calibration_markdown`)."""
     parts = [
         "## The paper's trackers against the standard trackers and the clairvoyant floor",
         "",
@@ -84,6 +85,9 @@ def baselines_markdown(
         "",
         baseline_report.consistency_markdown(summaries),
     ]
+    calibration = baseline_report.calibration_markdown(summaries)
+    if calibration:
+        parts += ["## Calibration goals per cell", "", calibration]
     return "\n".join(parts)
 
 

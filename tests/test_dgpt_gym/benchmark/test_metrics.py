@@ -179,6 +179,7 @@ def test_summarize_runs_intervals_and_floor_ratios():
             "rmse_y": 1.0,
             "rmse_2d": r,
             "track_lost": lost,
+            "coverage_3sigma_x_detected": 0.97 + x,
         }
         for s, x, r, lost in ((0, 0.01, 2.0, 0.0), (1, 0.02, 4.0, 1.0), (2, 0.03, 9.0, 0.0))
     ]
@@ -190,6 +191,11 @@ def test_summarize_runs_intervals_and_floor_ratios():
     # rmse_2d (2, 4, 9): mean 5, squared deviations 9 + 1 + 16 = 26, / 2 -> std sqrt(13)
     assert summary["rmse_2d_ci95"] == pytest.approx(quantile * np.sqrt(13 / 3), rel=1e-9)
     assert summary["nrmse_y_ci95"] == pytest.approx(0.0, abs=1e-15)
+    # the coverage on detected steps has nrmse_x's spread; y's coverage was not reported
+    assert summary["coverage_3sigma_x_detected_ci95"] == pytest.approx(
+        quantile * 0.01 / np.sqrt(3), rel=1e-9
+    )
+    assert "coverage_3sigma_y_detected_ci95" not in summary
     assert summary["track_loss_rate"] == pytest.approx(1 / 3) and summary["n_runs"] == 3
     # one run has no spread to estimate: the interval is NaN
     assert np.isnan(summarize_runs(rows[:1])["nrmse_x_ci95"])

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from dgpt_gym.benchmark import report, tuning, windows
+from dgpt_gym.benchmark import baseline_report, report, tuning, windows
 from dgpt_gym.benchmark.sweep import Grid, RunUnit, run_unit, run_units
 
 
@@ -225,3 +225,38 @@ def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
         "share_at_bound_signal_var",
         "share_at_bound_noise_var",
     ]
+
+
+def _calibration_cell(scenario, coverage, interval, nees, ucb_coverage, ucb_width, rmse):
+    """A summary row of dgpt-rbcm at sigma_z 1, clutter 5 with per-axis (x, y) values."""
+    row = {"tracker": "dgpt-rbcm", "scenario": scenario, "noise_std": 1.0, "clutter_rate": 5.0}
+    row["nees_median_detected"] = nees
+    for axis, c, h, u, w, r in zip("xy", coverage, interval, ucb_coverage, ucb_width, rmse):
+        row[f"coverage_3sigma_{axis}_detected"] = c
+        row[f"coverage_3sigma_{axis}_detected_ci95"] = h
+        row[f"ucb_coverage_{axis}"] = u
+        row[f"ucb_width_{axis}"] = w
+        row[f"rmse_{axis}"] = r
+    return row
+
+
+def test_calibration_table_marks_cells_below_the_goal_and_tallies_them():
+    summaries = [
+        # y: 98.5 + 0.3 = 98.8 < 99: the whole interval is below the goal
+        _calibration_cell(
+            "S1", (0.995, 0.985), (0.002, 0.003), 1.2, (0.999, 0.998), (8, 10), (2, 1)
+        ),
+        # x: 98.9 + 0.5 reaches 99: below on the mean only; y has no interval
+        _calibration_cell(
+            "S2", (0.989, 0.999), (0.005, np.nan), 0.5, (0.996, 0.997), (6, 6), (1, 3)
+        ),
+        {"tracker": "pda", "scenario": "S1", "noise_std": 1.0, "clutter_rate": 5.0},
+    ]
+    lines = baseline_report.calibration_markdown(summaries).splitlines()
+    assert "| scenario | sigma_z | clutter | dgpt-rbcm |" in lines  # only trackers that ran
+    assert "| S1 | 1 | 5 | 99.50 ± 0.20 / **98.50 ± 0.30** ↓ |" in lines
+    assert "| S2 | 1 | 5 | **98.90 ± 0.50** / 99.90 |" in lines
+    # UCB coverage: mean of 99.9, 99.8, 99.6, 99.7 and the lowest; half-width / RMSE:
+    # 4/2, 5/1, 3/1, 3/3 -> mean 2.75, highest 5; NEES 0.5 is outside [0.7, 2.8]
+    assert "| dgpt-rbcm | 2 | 2 (1) | 0.50-1.20 | 1 | 99.75 (99.60) | 2.75 (5.00) |" in lines
+    assert baseline_report.calibration_markdown(summaries[2:]) == ""
