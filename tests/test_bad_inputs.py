@@ -195,6 +195,8 @@ EVALUATE_ARGUMENTS = [
     (["--inputs", "xyz"], "--inputs"),
     (["--scheduler", "nonsense:://x"], "scheduler"),
     (["--no-such-option"], "unrecognized arguments"),
+    (["--verify", "0"], "count"),
+    (["--verify", "1"], "no finished run of this sweep"),
 ]
 
 

@@ -9,6 +9,7 @@ interval over runs beside the paper's value, RMSE, the ratio to the clairvoyant 
 3-sigma coverage and track loss. --paper runs the paper's full grid. Every
 finished run is stored at once in OUT/results.sqlite: re-running the same command resumes
 an interrupted sweep. The tables and figures are then regenerated from the database.
+--verify N re-runs N of the stored runs and checks that the installed code reproduces them.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from dgpt_gym.benchmark.sweep import (
     Grid,
     run_sweep,
     summarize_store,
+    verify_store,
 )
 from dgpt_gym.benchmark.tuning import (
     BASELINE_CANDIDATES,
@@ -146,6 +148,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="regenerate the tables and figures from the database without running anything",
     )
+    parser.add_argument(
+        "--verify",
+        metavar="N",
+        type=int,
+        default=None,
+        help="re-run N of the grid's runs that this version stored, chosen at random, check "
+        "that every metric (step times aside) equals the stored one to the last bit, and exit "
+        "(1 if any differs); runs nothing else",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument(
         "--tune-windows",
@@ -207,6 +218,36 @@ def build_grids(args: argparse.Namespace) -> list[Grid]:
     ]
 
 
+def verify(grids: list[Grid], out: Path, args: argparse.Namespace) -> int:
+    """``--verify N``: :func:`verify_store` on the grid's store, with a line per difference."""
+    try:
+        report = verify_store(
+            grids,
+            out,
+            args.verify,
+            args.workers,
+            progress=not args.no_progress,
+            batch_size=args.batch_size,
+        )
+    except ValueError as error:  # a bad N or --workers, or an empty store
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    for line in report.mismatches:
+        print(f"  differs: {line}")
+    skipped = (
+        f" ({report.other_versions} runs stored by other versions not checked)"
+        if report.other_versions
+        else ""
+    )
+    verdict = (
+        "every metric equals the stored one"
+        if not report.mismatches
+        else f"{len(report.mismatches)} differ"
+    )
+    print(f"re-ran {report.checked} runs of {out}/results.sqlite: {verdict}{skipped}")
+    return 1 if report.mismatches else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # the outputs quote the command that runs the sweep (--report-only writes the same files)
@@ -243,6 +284,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     out = args.out or Path("results") / ("paper" if args.paper else "quick")
+    if args.verify is not None:
+        return verify(grids, out, args)
     if not args.report_only:
         try:
             sweep = run_sweep(

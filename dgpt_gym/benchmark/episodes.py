@@ -261,6 +261,9 @@ def run_monte_carlo(
     return rows
 
 
+WALL_CLOCK_METRICS = ("step_time_ms",)
+"""Metrics that are wall-clock measurements: they differ between identical runs."""
+
 INTERVAL_KEYS = (
     "nrmse_x",
     "nrmse_y",

@@ -41,10 +41,6 @@ __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_U
 PAPER_UCB_GAIN = {"x": 88.0, "y": 42.0}
 """Sec. VII-G: the UCB covers the truth 88 % (X) and 42 % (Y) more often than the CI."""
 
-TIME_COLUMNS = ("step_time_ms",)
-"""Summary columns that are wall-clock measurements: they vary between identical runs."""
-
-
 def per_run_nrmse(grids: list[Grid], out: str | Path) -> dict[tuple, dict[int, float]]:
     """{(tracker, scenario, noise_std, clutter_rate): {seed: mean-over-axes NRMSE}} of the
     sweep's finished runs in the store at ``out``."""

@@ -7,7 +7,8 @@ and the CPF on the cell of Fig. 8). Each run is a picklable :class:`RunUnit` tha
 its tracker's entry point, so a worker needs no registry. A run is a pure function of its
 unit: local and Dask runs of the same units give identical rows. Runs of one tracker on one
 cell are stepped in lockstep in blocks (:func:`run_block`), which batches the GP trackers'
-learning and prediction over episodes without changing any run's numbers.
+learning and prediction over episodes without changing any run's numbers, which
+:func:`verify_store` checks on a sample of a store's runs.
 """
 
 from __future__ import annotations
@@ -21,11 +22,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 import dgpt_gym
-from dgpt_gym.benchmark.episodes import EpisodeResult, run_episodes, summarize_runs
+from dgpt_gym.benchmark.episodes import (
+    WALL_CLOCK_METRICS,
+    EpisodeResult,
+    run_episodes,
+    summarize_runs,
+)
 from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
@@ -45,6 +52,8 @@ __all__ = [
     "DEFAULT_BATCH_SIZE",
     "run_sweep",
     "summarize_store",
+    "VerifyReport",
+    "verify_store",
     "sweep_units",
     "QUICK_SWEEP",
     "PAPER_SWEEP",
@@ -395,6 +404,81 @@ def run_sweep(
                         bar.set_postfix(failed=failed)
                 bar.update(len(block))
     return SweepReport(len(units), len(units) - len(todo), len(todo), failed, tuple(errors))
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """What :func:`verify_store` found: ``checked`` runs re-run, ``other_versions`` finished
+    runs of the sweep stored by another dgpt-gym version (not checked), and one line per run
+    whose metrics differ."""
+
+    checked: int
+    other_versions: int
+    mismatches: tuple[str, ...]
+
+
+def _differing_metrics(stored: dict, rerun: dict) -> list[str]:
+    """The metrics that differ between a stored run and its re-run, as "key stored ->
+    re-run" (NaN equals NaN; the wall-clock metrics aside)."""
+    differing = []
+    for key in sorted((set(stored) | set(rerun)) - set(WALL_CLOCK_METRICS)):
+        old, new = stored.get(key), rerun.get(key)
+        same = old == new or (
+            isinstance(old, float) and isinstance(new, float) and np.isnan(old) and np.isnan(new)
+        )
+        if not same:
+            differing.append(f"{key} {old!r} -> {new!r}")
+    return differing
+
+
+def verify_store(
+    grids: Iterable[Grid],
+    out: str | Path,
+    count: int,
+    workers: int = 1,
+    progress: bool = True,
+    seed: int = 0,
+    batch_size: int = DEFAULT_BATCH_SIZE,
+) -> VerifyReport:
+    """Re-run ``count`` of the sweep's runs that this dgpt-gym version finished in the store
+    at ``out``, chosen at random (a ``numpy.random.Generator`` seeded with ``seed``), and
+    compare every metric with the stored one to the last bit, the wall-clock ones aside.
+
+    A difference means the store holds numbers the installed code does not produce: rows
+    from a run interrupted across a code change, another machine's floating point, or a
+    run that depends on something besides its unit (its block, the worker). The re-runs
+    form their own lockstep blocks, so this also checks that a run's numbers do not
+    depend on its block.
+    """
+    check_integer("count", count, low=1)
+    units = {unit.key: unit for unit in sweep_units(grids)}
+    with ResultsStore(out) as store:
+        rows = store.rows(set(units), status="ok")
+    mine = [row for row in rows if row["version"] == dgpt_gym.__version__]
+    if not mine:
+        raise ValueError(
+            f"the store at {out} holds no finished run of this sweep by dgpt-gym "
+            f"{dgpt_gym.__version__}; run the sweep first"
+        )
+    picked = np.random.default_rng(seed).choice(
+        len(mine), size=min(count, len(mine)), replace=False
+    )
+    chosen = [mine[index] for index in sorted(picked)]
+    outcomes = run_units([units[row["run_key"]] for row in chosen], workers, progress, batch_size)
+    mismatches = []
+    for row, outcome in zip(chosen, outcomes):
+        if outcome["status"] != "ok":
+            differing = [f"the re-run failed: {outcome['error']}"]
+        else:
+            differing = _differing_metrics(row["metrics"], outcome["metrics"])
+        if differing:
+            mismatches.append(
+                f"{row['tracker']} {row['scenario']} sigma_z {row['noise_std']:g} clutter"
+                f" {row['clutter_rate']:g} seed {row['seed']}: "
+                + "; ".join(differing[:3])
+                + (f"; and {len(differing) - 3} more" if len(differing) > 3 else "")
+            )
+    return VerifyReport(len(chosen), len(rows) - len(mine), tuple(mismatches))
 
 
 def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:

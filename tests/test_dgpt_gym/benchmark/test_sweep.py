@@ -1,6 +1,7 @@
 """The evaluation harness: grids, the SQLite results store, resume, Dask, failures, outputs."""
 
 import csv
+import json
 import signal
 import sqlite3
 import subprocess
@@ -13,11 +14,13 @@ import numpy as np
 import pytest
 from flaky_tracker import FAILING_SEED
 
+import dgpt_gym
 from dgpt_gym import make_tracker, register_tracker
+from dgpt_gym.benchmark import cli as evaluate_cli
 from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.benchmark.outputs import write_outputs
 from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore
-from dgpt_gym.benchmark.sweep import Grid, run_sweep, summarize_store, sweep_units
+from dgpt_gym.benchmark.sweep import Grid, run_sweep, summarize_store, sweep_units, verify_store
 from dgpt_gym.benchmark.windows import tuned_kwargs
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -206,3 +209,43 @@ def test_overlapping_grids_run_each_unit_once():
     units = sweep_units([a, b])
     assert len(units) == 4 + 2
     assert len({unit.key for unit in units}) == len(units)
+
+
+def test_verify_reruns_stored_runs_and_names_the_metric_that_differs(tmp_path, monkeypatch, capsys):
+    grid = Grid(trackers=("centroid",), scenarios=("S1", "S2"), clutter_rates=(5.0,), runs=3)
+    run_sweep([grid], tmp_path, workers=1, progress=False)
+    clean = verify_store([grid], tmp_path, count=4, progress=False)
+    assert (clean.checked, clean.other_versions, clean.mismatches) == (4, 0, ())
+    database = sqlite3.connect(tmp_path / DATABASE_NAME)
+    with database:
+        # one stored run that its code does not produce, by the last bit of one metric
+        (text,) = database.execute(
+            "SELECT metrics FROM runs WHERE scenario = 'S2' AND seed = 1"
+        ).fetchone()
+        metrics = json.loads(text)
+        metrics["nrmse_x"] = float(np.nextafter(metrics["nrmse_x"], 1.0))
+        database.execute(
+            "UPDATE runs SET metrics = ? WHERE scenario = 'S2' AND seed = 1",
+            (json.dumps(metrics),),
+        )
+        # and one stored by another version, which is not this code's to reproduce
+        database.execute("UPDATE runs SET version = '0.0.0' WHERE scenario = 'S1' AND seed = 0")
+    database.close()
+    tampered = verify_store([grid], tmp_path, count=100, progress=False)
+    assert (tampered.checked, tampered.other_versions) == (5, 1)
+    (line,) = tampered.mismatches
+    assert line.startswith("centroid S2 sigma_z 1 clutter 5 seed 1: nrmse_x ")
+    assert "->" in line and ";" not in line  # that metric alone
+    argv = ["--trackers", "centroid", "--scenarios", "S1", "S2", "--clutter-rates", "5"]
+    argv += ["--runs", "3", "--out", str(tmp_path), "--verify", "6", "--no-progress"]
+    assert evaluate_cli.main(argv) == 1
+    printed = capsys.readouterr().out
+    assert "differs: centroid S2 sigma_z 1 clutter 5 seed 1: nrmse_x" in printed
+    assert (
+        "re-ran 5 runs" in printed and "1 differ" in printed and "1 runs stored by other" in printed
+    )
+    monkeypatch.setattr(dgpt_gym, "__version__", "0.0.0-other")
+    with pytest.raises(ValueError, match="no finished run of this sweep"):
+        verify_store([grid], tmp_path, count=1, progress=False)
+    with pytest.raises(ValueError, match="count"):
+        verify_store([grid], tmp_path, count=0, progress=False)
