@@ -155,7 +155,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="re-run N of the grid's runs that this version stored, chosen at random, check "
         "that every metric (step times aside) equals the stored one to the last bit, and exit "
-        "(1 if any differs); runs nothing else",
+        "(1 if any differs); runs nothing else, on local processes",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument(
