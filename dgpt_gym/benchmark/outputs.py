@@ -93,7 +93,7 @@ def write_cells_csv(summaries: list[dict], path: Path) -> Path:
 
 
 def _percent_pair(row: dict, key: str) -> str:
-    return f"{100 * row[f'{key}_x']:.0f} / {100 * row[f'{key}_y']:.0f}"
+    return f"{100 * row[f'{key}_x']:.2f} / {100 * row[f'{key}_y']:.2f}"
 
 
 def ucb_gain(rows: list[dict]) -> dict[str, float]:
