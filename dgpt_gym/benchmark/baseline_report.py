@@ -234,7 +234,7 @@ def calibration_markdown(summaries: list[dict], trackers=CALIBRATION_TRACKERS) -
         "| scenario | sigma_z | clutter | " + " | ".join(present) + " |",
         "|---|---|---|" + "---|" * len(present),
     ]
-    tallies = {tracker: {"cells": 0, "below": 0, "surely_below": 0} for tracker in present}
+    tallies = {tracker: {"below": 0, "surely_below": 0} for tracker in present}
     for scenario, noise_std, clutter in cells:
         entries = []
         for tracker in present:
@@ -243,7 +243,6 @@ def calibration_markdown(summaries: list[dict], trackers=CALIBRATION_TRACKERS) -
                 entries.append("-")
                 continue
             tally = tallies[tracker]
-            tally["cells"] += 1
             axes = [_coverage_cell(row, axis) for axis in "xy"]
             tally["below"] += any(below for _, below, _ in axes)
             tally["surely_below"] += any(surely for _, _, surely in axes)
@@ -289,7 +288,7 @@ def calibration_markdown(summaries: list[dict], trackers=CALIBRATION_TRACKERS) -
             f"{np.nanmean(ratios):.2f} ({np.nanmax(ratios):.2f})"
         )
         lines.append(
-            f"| {tracker} | {tally['cells']} | {tally['below']} ({tally['surely_below']}) | "
+            f"| {tracker} | {len(mine)} | {tally['below']} ({tally['surely_below']}) | "
             f"{np.nanmin(nees):.2f}-{np.nanmax(nees):.2f} | "
             f"{int(np.sum((nees < low) | (nees > high)))} | {ucb} |"
         )
