@@ -69,9 +69,11 @@ class EpisodeResult:
         Per axis (suffix ``_x`` / ``_y``): ``nrmse``, ``rmse``, ``ci_coverage`` and
         ``ci_width`` (3 sigma), ``ucb_coverage`` and ``ucb_width`` (NaN without a UCB),
         ``coverage_{1,2,3}sigma``. In 2-D: ``rmse_2d``, ``anees`` and ``nees_median``.
-        ``rmse_2d``, ``anees``, ``nees_median`` and the sigma coverages also on the steps
-        where some sensor senses the target (suffix ``_detected``) and on coverage-gap
-        steps (``_gap``; NaN when the episode has none). ``track_lost`` (0 or 1) and
+        ``rmse_2d``, ``anees``, ``nees_median``, the sigma coverages and, per axis,
+        ``rmse``, ``ucb_coverage`` and ``ucb_width`` also on the steps where some sensor
+        senses the target (suffix ``_detected``, e.g. ``ucb_coverage_x_detected``: the
+        steps issue 12's UCB goal concerns) and on coverage-gap steps (``_gap``; NaN when
+        the episode has none). ``track_lost`` (0 or 1) and
         ``lost_step_fraction`` (:func:`dgpt_gym.benchmark.metrics.track_loss` at twice the sensing
         range), ``step_time_ms`` (median) and ``no_detection_fraction``. Then the tracker's
         own :meth:`~dgpt_gym.tracker.TrackerBase.diagnostics` at the end of the episode
@@ -115,6 +117,8 @@ class EpisodeResult:
         keys = ["rmse_2d", "anees", "nees_median"] + [
             f"coverage_{k}sigma_{axis}" for k in (1, 2, 3) for axis in "xy"
         ]
+        if suffix:  # over all steps, the per-axis keys are metrics()'s own
+            keys += [f"{key}_{axis}" for key in ("rmse", "ucb_coverage", "ucb_width") for axis in "xy"]
         if mean.shape[0] == 0:
             return {key + suffix: float("nan") for key in keys}
         errors = metrics.nees(mean, truth, var)
@@ -126,6 +130,15 @@ class EpisodeResult:
         for k in (1, 2, 3):
             covered = metrics.sigma_coverage(mean, truth, var, k)
             values[f"coverage_{k}sigma_x"], values[f"coverage_{k}sigma_y"] = map(float, covered)
+        ucb = self.ucb[steps]
+        has_ucb = bool(np.all(np.isfinite(self.ucb)))
+        per_axis = {
+            "rmse": metrics.rmse(mean, truth),
+            "ucb_coverage": metrics.coverage(mean, truth, ucb) if has_ucb else np.full(2, np.nan),
+            "ucb_width": metrics.mean_width(ucb) if has_ucb else np.full(2, np.nan),
+        }
+        for key, value in per_axis.items():
+            values[f"{key}_x"], values[f"{key}_y"] = map(float, value)
         return {key + suffix: values[key] for key in keys}
 
 

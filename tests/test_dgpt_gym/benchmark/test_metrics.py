@@ -1,3 +1,4 @@
+import dataclasses
 import warnings
 
 import numpy as np
@@ -166,7 +167,42 @@ def test_episode_metrics_split_detected_and_gap_steps():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gap_values = {key: value for key, value in always.metrics().items() if key.endswith("_gap")}
-    assert len(gap_values) == 9 and all(np.isnan(value) for value in gap_values.values())
+    assert len(gap_values) == 15 and all(np.isnan(value) for value in gap_values.values())
+
+
+def test_episode_ucb_and_rmse_per_axis_on_detected_and_gap_steps():
+    # x errors 1, 5, 3, 0.5 and y errors 0, 1, 4, 2 under half-widths of 2 (x) and 3 (y);
+    # the second step is a coverage gap
+    errors = np.array([[1.0, 0.0], [5.0, 1.0], [3.0, 4.0], [0.5, 2.0]])
+    truth = np.zeros((4, 2))
+    ucb = np.array([[2.0, 3.0], [2.0, 3.0], [2.0, 3.0], [2.0, 1.0]])
+    result = EpisodeResult(
+        truth=truth,
+        mean=truth + errors,
+        var=np.ones((4, 2)),
+        ucb=ucb,
+        step_time=np.full(4, 1e-4),
+        n_measurements=np.ones(4, dtype=int),
+        n_detecting=np.array([1, 0, 2, 1]),
+    )
+    values = result.metrics()
+    # detected steps 0, 2, 3: x covered where 1 <= 2 and 0.5 <= 2; y where 0 <= 3
+    assert values["ucb_coverage_x_detected"] == pytest.approx(2 / 3)
+    assert values["ucb_coverage_y_detected"] == pytest.approx(1 / 3)
+    assert values["ucb_width_x_detected"] == pytest.approx(4.0)
+    assert values["ucb_width_y_detected"] == pytest.approx(2 * (3 + 3 + 1) / 3)
+    assert values["rmse_x_detected"] == pytest.approx(np.sqrt((1 + 9 + 0.25) / 3))
+    assert values["rmse_y_detected"] == pytest.approx(np.sqrt((0 + 16 + 4) / 3))
+    # the gap step: 5 > 2 on x, 1 <= 3 on y
+    assert values["ucb_coverage_x_gap"] == 0.0 and values["ucb_coverage_y_gap"] == 1.0
+    assert values["rmse_x_gap"] == pytest.approx(5.0)
+    # over all steps the per-axis keys keep their names
+    assert values["ucb_coverage_x"] == pytest.approx(2 / 4)
+    assert "rmse_x_detected_detected" not in values
+    # a tracker without a UCB: NaN on every subset
+    no_ucb = dataclasses.replace(result, ucb=np.full((4, 2), np.nan))
+    assert np.isnan(no_ucb.metrics()["ucb_coverage_x_detected"])
+    assert np.isnan(no_ucb.metrics()["ucb_width_y_gap"])
 
 
 def test_summarize_runs_intervals_and_floor_ratios():

@@ -228,15 +228,20 @@ def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
 
 
 def _calibration_cell(scenario, coverage, interval, nees, ucb_coverage, ucb_width, rmse):
-    """A summary row of dgpt-rbcm at sigma_z 1, clutter 5 with per-axis (x, y) values."""
+    """A summary row of dgpt-rbcm at sigma_z 1, clutter 5 with per-axis (x, y) values. The
+    UCB's values are on detected steps; over all steps its coverage is 1 point lower and
+    its width and RMSE twice and four times those."""
     row = {"tracker": "dgpt-rbcm", "scenario": scenario, "noise_std": 1.0, "clutter_rate": 5.0}
     row["nees_median_detected"] = nees
     for axis, c, h, u, w, r in zip("xy", coverage, interval, ucb_coverage, ucb_width, rmse):
         row[f"coverage_3sigma_{axis}_detected"] = c
         row[f"coverage_3sigma_{axis}_detected_ci95"] = h
-        row[f"ucb_coverage_{axis}"] = u
-        row[f"ucb_width_{axis}"] = w
-        row[f"rmse_{axis}"] = r
+        row[f"ucb_coverage_{axis}_detected"] = u
+        row[f"ucb_width_{axis}_detected"] = w
+        row[f"rmse_{axis}_detected"] = r
+        row[f"ucb_coverage_{axis}"] = u - 0.01
+        row[f"ucb_width_{axis}"] = 2 * w
+        row[f"rmse_{axis}"] = 4 * r
     return row
 
 
@@ -256,7 +261,11 @@ def test_calibration_table_marks_cells_below_the_goal_and_tallies_them():
     assert "| scenario | sigma_z | clutter | dgpt-rbcm |" in lines  # only trackers that ran
     assert "| S1 | 1 | 5 | 99.50 ± 0.20 / **98.50 ± 0.30** ↓ |" in lines
     assert "| S2 | 1 | 5 | **98.90 ± 0.50** / 99.90 |" in lines
-    # UCB coverage: mean of 99.9, 99.8, 99.6, 99.7 and the lowest; half-width / RMSE:
-    # 4/2, 5/1, 3/1, 3/3 -> mean 2.75, highest 5; NEES 0.5 is outside [0.7, 2.8]
-    assert "| dgpt-rbcm | 2 | 2 (1) | 0.50-1.20 | 1 | 99.75 (99.60) | 2.75 (5.00) |" in lines
+    # UCB on detected steps, coverage: mean of 99.9, 99.8, 99.6, 99.7 and the lowest;
+    # half-width / RMSE: 4/2, 5/1, 3/1, 3/3 -> mean 2.75, highest 5; over all steps one point
+    # lower and half the ratio; NEES 0.5 is outside [0.7, 2.8]
+    assert (
+        "| dgpt-rbcm | 2 | 2 (1) | 0.50-1.20 | 1 | 99.75 (99.60) | 2.75 (5.00) |"
+        " 98.75 (98.60) | 1.38 (2.50) |"
+    ) in lines
     assert baseline_report.calibration_markdown(summaries[2:]) == ""
