@@ -127,9 +127,7 @@ def tracker_spec(id: str) -> TrackerSpec:
     except (KeyError, TypeError):
         renamed = load_table(RENAMED_TABLE) if isinstance(id, str) else {}
         if id in renamed:
-            raise ValueError(
-                f"tracker {id!r} was renamed or retired: use {renamed[id]}"
-            ) from None
+            raise ValueError(f"tracker {id!r} was renamed or retired: use {renamed[id]}") from None
         raise ValueError(
             f"tracker must be one of {tracker_ids()} or 'package.module:ClassName'; got {id!r}"
         ) from None

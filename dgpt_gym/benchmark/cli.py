@@ -326,10 +326,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     except OSError as error:  # the report folder is read-only or full
-        print(f"error: cannot write the outputs to {args.report_dir or out}: {error}", file=sys.stderr)
+        print(
+            f"error: cannot write the outputs to {args.report_dir or out}: {error}", file=sys.stderr
+        )
         return 1
     summaries, failures = summarize_store(grids, out)
     print(format_summary_table(add_floor_ratios(summaries)))
     print(f"{len(failures)} failed runs; wrote {written[0]} and {len(written) - 1} more files")
     return 0
-

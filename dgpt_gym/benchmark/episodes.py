@@ -118,7 +118,9 @@ class EpisodeResult:
             f"coverage_{k}sigma_{axis}" for k in (1, 2, 3) for axis in "xy"
         ]
         if suffix:  # over all steps, the per-axis keys are metrics()'s own
-            keys += [f"{key}_{axis}" for key in ("rmse", "ucb_coverage", "ucb_width") for axis in "xy"]
+            keys += [
+                f"{key}_{axis}" for key in ("rmse", "ucb_coverage", "ucb_width") for axis in "xy"
+            ]
         if mean.shape[0] == 0:
             return {key + suffix: float("nan") for key in keys}
         errors = metrics.nees(mean, truth, var)
@@ -218,7 +220,9 @@ def run_episodes(
 def _update_each(trackers, observations, truths):
     """One ``update`` per tracker; only oracles are handed their episode's ``info``."""
     return [
-        tracker.update(observation, truth=truth) if is_oracle(tracker) else tracker.update(observation)
+        tracker.update(observation, truth=truth)
+        if is_oracle(tracker)
+        else tracker.update(observation)
         for tracker, observation, truth in zip(trackers, observations, truths)
     ]
 

@@ -41,6 +41,7 @@ __all__ = ["write_outputs", "uncertainty_markdown", "results_markdown", "PAPER_U
 PAPER_UCB_GAIN = {"x": 88.0, "y": 42.0}
 """Sec. VII-G: the UCB covers the truth 88 % (X) and 42 % (Y) more often than the CI."""
 
+
 def per_run_nrmse(grids: list[Grid], out: str | Path) -> dict[tuple, dict[int, float]]:
     """{(tracker, scenario, noise_std, clutter_rate): {seed: mean-over-axes NRMSE}} of the
     sweep's finished runs in the store at ``out``."""
@@ -387,9 +388,7 @@ def write_outputs(
     written.append(baselines)
 
     paper_rows = [
-        row
-        for row in summaries
-        if row["tracker"] in PAPER_GP_TRACKERS + PAPER_AS_PRINTED_TRACKERS
+        row for row in summaries if row["tracker"] in PAPER_GP_TRACKERS + PAPER_AS_PRINTED_TRACKERS
     ]
     if paper_rows:
         tables = report_dir / "results_tables.md"
@@ -423,9 +422,7 @@ def write_outputs(
 
     curves, settings = error_curves(units)
     if curves:
-        written.append(
-            plot_error_against_time(curves, figures / "error_vs_time.png", settings)
-        )
+        written.append(plot_error_against_time(curves, figures / "error_vs_time.png", settings))
     written.append(plot_scenarios(figures / "scenarios.png"))
     if training_time_csv is not None and Path(training_time_csv).exists():
         rows = read_training_time(training_time_csv)

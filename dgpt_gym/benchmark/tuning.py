@@ -91,15 +91,20 @@ def _imm_candidates() -> list[dict]:
     for stay in (0.9, 0.95, 0.98):
         for low, high in ((0.1, 20.0), (0.5, 50.0), (1.0, 100.0)):
             candidates.append(
-                {"turn_rates": [0.0, 0.0], "noise_diff_coeffs": [low, high],
-                 "mode_stay_probability": stay}
+                {
+                    "turn_rates": [0.0, 0.0],
+                    "noise_diff_coeffs": [low, high],
+                    "mode_stay_probability": stay,
+                }
             )
             for rates in ((0.25,), (0.35,), (0.45,), (0.52,), (0.35, 0.52)):
                 turn_rates = [0.0, 0.0] + [sign * w for w in rates for sign in (1.0, -1.0)]
                 candidates.append(
-                    {"turn_rates": turn_rates,
-                     "noise_diff_coeffs": [low, high] + [low] * (len(turn_rates) - 2),
-                     "mode_stay_probability": stay}
+                    {
+                        "turn_rates": turn_rates,
+                        "noise_diff_coeffs": [low, high] + [low] * (len(turn_rates) - 2),
+                        "mode_stay_probability": stay,
+                    }
                 )
     return candidates
 
@@ -176,7 +181,9 @@ def grid_search(
             for scenario, runs in by_scenario.items()
         }
         for scenario, (nrmse, rmse) in scores.items():
-            rows.append({"candidate": candidate, "scenario": scenario, "nrmse": nrmse, "rmse": rmse})
+            rows.append(
+                {"candidate": candidate, "scenario": scenario, "nrmse": nrmse, "rmse": rmse}
+            )
         rows.append(
             {
                 "candidate": candidate,
