@@ -212,9 +212,9 @@ def _coverage_cell(row: dict, axis: str) -> tuple[str, bool, bool]:
 
 def _ucb_summary(rows: list[dict], suffix: str) -> str:
     """Two table cells: the UCB's coverage over ``rows`` (cells) and axes on the steps of
-    ``suffix`` ("" all, "_detected"), mean (lowest; how many cell-axes miss the goal), and
-    its half-width over the RMSE on the same steps, mean (highest; how many miss); "- | -"
-    without a UCB."""
+    ``suffix`` ("" all, "_detected"), mean (lowest; how many cell-axes miss the goal, and
+    in how many the whole 95 % interval over runs does), and its half-width over the RMSE
+    on the same steps, mean (highest; how many miss); "- | -" without a UCB."""
     coverage = np.array(
         [_value(row, f"ucb_coverage_{axis}{suffix}") for row in rows for axis in "xy"]
     )
@@ -227,10 +227,16 @@ def _ucb_summary(rows: list[dict], suffix: str) -> str:
             for axis in "xy"
         ]
     )
-    below = int(np.sum(coverage < CALIBRATION_GOALS["ucb_coverage"]))
+    intervals = np.array(
+        [_value(row, f"ucb_coverage_{axis}{suffix}_ci95") for row in rows for axis in "xy"]
+    )
+    goal = CALIBRATION_GOALS["ucb_coverage"]
+    below = int(np.sum(coverage < goal))
+    surely_below = int(np.sum(coverage + intervals < goal))  # NaN interval: not counted
     above = int(np.sum(ratios > CALIBRATION_GOALS["ucb_half_width_to_rmse"]))
     return (
-        f"{100 * np.nanmean(coverage):.2f} ({100 * np.nanmin(coverage):.2f}; {below} below) | "
+        f"{100 * np.nanmean(coverage):.2f} ({100 * np.nanmin(coverage):.2f}; {below} below,"
+        f" {surely_below} surely) | "
         f"{np.nanmean(ratios):.2f} ({np.nanmax(ratios):.2f}; {above} above)"
     )
 
@@ -287,7 +293,8 @@ def calibration_markdown(summaries: list[dict], trackers=CALIBRATION_TRACKERS) -
         " half-width over the RMSE on the same steps per axis, goal at most"
         f" {CALIBRATION_GOALS['ucb_half_width_to_rmse']:g} (DGPT-RBCM's goals; shown for all):"
         " the mean over cells and axes, and in brackets the worst cell and axis and the number of"
-        " cell-axes that miss the goal.",
+        " cell-axes that miss the goal (for the coverage: and whose whole 95 % interval over"
+        " runs does).",
         "",
         "| tracker | cells | 3-sigma below goal (interval wholly below) | median NEES, range"
         " | median NEES outside goal | UCB coverage %, detected | UCB half-width / RMSE,"

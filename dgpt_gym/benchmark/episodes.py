@@ -287,6 +287,10 @@ INTERVAL_KEYS = (
     "rmse_2d",
     "coverage_3sigma_x_detected",
     "coverage_3sigma_y_detected",
+    "ucb_coverage_x",
+    "ucb_coverage_y",
+    "ucb_coverage_x_detected",
+    "ucb_coverage_y_detected",
 )
 """Metrics whose 95 % interval over runs :func:`summarize_runs` reports (``<key>_ci95``)."""
 

@@ -216,6 +216,7 @@ def test_summarize_runs_intervals_and_floor_ratios():
             "rmse_2d": r,
             "track_lost": lost,
             "coverage_3sigma_x_detected": 0.97 + x,
+            "ucb_coverage_y_detected": 0.99 - x,
         }
         for s, x, r, lost in ((0, 0.01, 2.0, 0.0), (1, 0.02, 4.0, 1.0), (2, 0.03, 9.0, 0.0))
     ]
@@ -232,6 +233,11 @@ def test_summarize_runs_intervals_and_floor_ratios():
         quantile * 0.01 / np.sqrt(3), rel=1e-9
     )
     assert "coverage_3sigma_y_detected_ci95" not in summary
+    # and so has the UCB's coverage on detected steps (its interval is the calibration
+    # table's "surely below")
+    assert summary["ucb_coverage_y_detected_ci95"] == pytest.approx(
+        quantile * 0.01 / np.sqrt(3), rel=1e-9
+    )
     assert summary["track_loss_rate"] == pytest.approx(1 / 3) and summary["n_runs"] == 3
     # one run has no spread to estimate: the interval is NaN
     assert np.isnan(summarize_runs(rows[:1])["nrmse_x_ci95"])

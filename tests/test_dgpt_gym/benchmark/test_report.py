@@ -227,16 +227,21 @@ def test_bounds_table_and_csv_take_what_each_tracker_reports(tmp_path):
     ]
 
 
-def _calibration_cell(scenario, coverage, interval, nees, ucb_coverage, ucb_width, rmse):
+def _calibration_cell(
+    scenario, coverage, interval, nees, ucb_coverage, ucb_width, rmse, ucb_interval
+):
     """A summary row of dgpt-rbcm at sigma_z 1, clutter 5 with per-axis (x, y) values. The
-    UCB's values are on detected steps; over all steps its coverage is 1 point lower and
-    its width and RMSE twice and four times those."""
+    UCB's values are on detected steps; over all steps its coverage is 1 point lower, with
+    no interval, and its width and RMSE twice and four times those."""
     row = {"tracker": "dgpt-rbcm", "scenario": scenario, "noise_std": 1.0, "clutter_rate": 5.0}
     row["nees_median_detected"] = nees
-    for axis, c, h, u, w, r in zip("xy", coverage, interval, ucb_coverage, ucb_width, rmse):
+    for axis, c, h, u, w, r, uh in zip(
+        "xy", coverage, interval, ucb_coverage, ucb_width, rmse, ucb_interval
+    ):
         row[f"coverage_3sigma_{axis}_detected"] = c
         row[f"coverage_3sigma_{axis}_detected_ci95"] = h
         row[f"ucb_coverage_{axis}_detected"] = u
+        row[f"ucb_coverage_{axis}_detected_ci95"] = uh
         row[f"ucb_width_{axis}_detected"] = w
         row[f"rmse_{axis}_detected"] = r
         row[f"ucb_coverage_{axis}"] = u - 0.01
@@ -249,11 +254,19 @@ def test_calibration_table_marks_cells_below_the_goal_and_tallies_them():
     summaries = [
         # y: 98.5 + 0.3 = 98.8 < 99: the whole interval is below the goal
         _calibration_cell(
-            "S1", (0.995, 0.985), (0.002, 0.003), 1.2, (0.999, 0.998), (8, 10), (2, 1)
+            "S1", (0.995, 0.985), (0.002, 0.003), 1.2, (0.999, 0.998), (8, 10), (2, 1), (0, 0)
         ),
-        # x: 98.9 + 0.5 reaches 99: below on the mean only; y has no interval
+        # x: 98.9 + 0.5 reaches 99: below on the mean only; y has no interval. The UCB's
+        # x: 99.6 + 0.05 < 99.7, wholly below its goal
         _calibration_cell(
-            "S2", (0.989, 0.999), (0.005, np.nan), 0.5, (0.996, 0.997), (6, 6), (1, 3)
+            "S2",
+            (0.989, 0.999),
+            (0.005, np.nan),
+            0.5,
+            (0.996, 0.997),
+            (6, 6),
+            (1, 3),
+            (0.0005, 0.001),
         ),
         {"tracker": "pda", "scenario": "S1", "noise_std": 1.0, "clutter_rate": 5.0},
     ]
@@ -262,11 +275,12 @@ def test_calibration_table_marks_cells_below_the_goal_and_tallies_them():
     assert "| S1 | 1 | 5 | 99.50 ± 0.20 / **98.50 ± 0.30** ↓ |" in lines
     assert "| S2 | 1 | 5 | **98.90 ± 0.50** / 99.90 |" in lines
     # UCB on detected steps, coverage: mean of 99.9, 99.8, 99.6, 99.7 and the lowest, and
-    # one below 99.7 (99.7 itself meets it); half-width / RMSE: 4/2, 5/1, 3/1, 3/3 -> mean
-    # 2.75, highest 5, one above 4; over all steps one point lower (all four below) and half
-    # the ratio (none above); NEES 0.5 is outside [0.7, 2.8]
+    # one below 99.7 (99.7 itself meets it), surely; half-width / RMSE: 4/2, 5/1, 3/1, 3/3 ->
+    # mean 2.75, highest 5, one above 4; over all steps one point lower (all four below,
+    # none surely without intervals) and half the ratio (none above); NEES 0.5 is outside
+    # [0.7, 2.8]
     assert (
-        "| dgpt-rbcm | 2 | 2 (1) | 0.50-1.20 | 1 | 99.75 (99.60; 1 below) | 2.75 (5.00; 1 above) |"
-        " 98.75 (98.60; 4 below) | 1.38 (2.50; 0 above) |"
+        "| dgpt-rbcm | 2 | 2 (1) | 0.50-1.20 | 1 | 99.75 (99.60; 1 below, 1 surely) |"
+        " 2.75 (5.00; 1 above) | 98.75 (98.60; 4 below, 0 surely) | 1.38 (2.50; 0 above) |"
     ) in lines
     assert baseline_report.calibration_markdown(summaries[2:]) == ""
