@@ -72,8 +72,8 @@ class EpisodeResult:
         ``rmse_2d``, ``anees``, ``nees_median``, the sigma coverages and, per axis,
         ``rmse``, ``ucb_coverage`` and ``ucb_width`` also on the steps where some sensor
         senses the target (suffix ``_detected``, e.g. ``ucb_coverage_x_detected``: the
-        steps issue 12's UCB goal concerns) and on coverage-gap steps (``_gap``; NaN when
-        the episode has none). ``track_lost`` (0 or 1) and
+        steps of :data:`dgpt_gym.benchmark.baseline_report.CALIBRATION_GOALS`) and on
+        coverage-gap steps (``_gap``; NaN when the episode has none). ``track_lost`` (0 or 1) and
         ``lost_step_fraction`` (:func:`dgpt_gym.benchmark.metrics.track_loss` at twice the sensing
         range), ``step_time_ms`` (median) and ``no_detection_fraction``. Then the tracker's
         own :meth:`~dgpt_gym.tracker.TrackerBase.diagnostics` at the end of the episode

@@ -171,8 +171,8 @@ def test_episode_metrics_split_detected_and_gap_steps():
 
 
 def test_episode_ucb_and_rmse_per_axis_on_detected_and_gap_steps():
-    # x errors 1, 5, 3, 0.5 and y errors 0, 1, 4, 2 under half-widths of 2 (x) and 3 (y);
-    # the second step is a coverage gap
+    # x errors 1, 5, 3, 0.5 under half-widths 2, 2, 2, 2 and y errors 0, 1, 4, 2 under 3, 3,
+    # 3, 1; the second step is a coverage gap
     errors = np.array([[1.0, 0.0], [5.0, 1.0], [3.0, 4.0], [0.5, 2.0]])
     truth = np.zeros((4, 2))
     ucb = np.array([[2.0, 3.0], [2.0, 3.0], [2.0, 3.0], [2.0, 1.0]])
