@@ -83,11 +83,8 @@ class EpisodeResult:
         ci = metrics.CI_SIGMAS * std
         values = {
             "nrmse": metrics.nrmse(self.mean, self.truth),
-            "rmse": metrics.rmse(self.mean, self.truth),
             "ci_coverage": metrics.coverage(self.mean, self.truth, ci),
             "ci_width": metrics.mean_width(ci),
-            "ucb_coverage": metrics.coverage(self.mean, self.truth, self.ucb),
-            "ucb_width": metrics.mean_width(self.ucb),
         }
         flat = {
             f"{key}_{axis}": float(value[i])
@@ -95,12 +92,9 @@ class EpisodeResult:
             for i, axis in enumerate("xy")
         }
         has_ucb = bool(np.all(np.isfinite(self.ucb)))
-        if not has_ucb:
-            for key in ("ucb_coverage_x", "ucb_coverage_y", "ucb_width_x", "ucb_width_y"):
-                flat[key] = float("nan")
         detected = self.n_detecting > 0
         for suffix, steps in (("", slice(None)), ("_detected", detected), ("_gap", ~detected)):
-            flat.update(self._consistency(steps, suffix))
+            flat.update(self._consistency(steps, suffix, has_ucb))
         lost = metrics.track_loss(
             self.mean, self.truth, metrics.TRACK_LOSS_RANGES * self.sensing_range
         )
@@ -111,16 +105,14 @@ class EpisodeResult:
         flat.update({key: float(value) for key, value in self.diagnostics.items()})
         return flat
 
-    def _consistency(self, steps, suffix: str) -> dict[str, float]:
-        """RMSE, NEES and sigma coverage over ``steps`` (NaN when there are none)."""
+    def _consistency(self, steps, suffix: str, has_ucb: bool) -> dict[str, float]:
+        """RMSE (2-D and per axis), NEES, sigma coverage and the UCB's coverage and width
+        (NaN unless ``has_ucb``) over ``steps`` (NaN when there are none)."""
         mean, truth, var = self.mean[steps], self.truth[steps], self.var[steps]
-        keys = ["rmse_2d", "anees", "nees_median"] + [
-            f"coverage_{k}sigma_{axis}" for k in (1, 2, 3) for axis in "xy"
-        ]
-        if suffix:  # over all steps, the per-axis keys are metrics()'s own
-            keys += [
-                f"{key}_{axis}" for key in ("rmse", "ucb_coverage", "ucb_width") for axis in "xy"
-            ]
+        per_axis_keys = ("coverage_1sigma", "coverage_2sigma", "coverage_3sigma", "rmse")
+        per_axis_keys += ("ucb_coverage", "ucb_width")
+        keys = ["rmse_2d", "anees", "nees_median"]
+        keys += [f"{key}_{axis}" for key in per_axis_keys for axis in "xy"]
         if mean.shape[0] == 0:
             return {key + suffix: float("nan") for key in keys}
         errors = metrics.nees(mean, truth, var)
@@ -133,7 +125,6 @@ class EpisodeResult:
             covered = metrics.sigma_coverage(mean, truth, var, k)
             values[f"coverage_{k}sigma_x"], values[f"coverage_{k}sigma_y"] = map(float, covered)
         ucb = self.ucb[steps]
-        has_ucb = bool(np.all(np.isfinite(self.ucb)))
         per_axis = {
             "rmse": metrics.rmse(mean, truth),
             "ucb_coverage": metrics.coverage(mean, truth, ucb) if has_ucb else np.full(2, np.nan),
