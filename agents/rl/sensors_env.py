@@ -21,7 +21,9 @@ def filter_reports(observation: dict, woken: np.ndarray) -> dict:
     ``"awake"`` entry is ``woken`` (a sleeping sensor's silence is no evidence to the
     tracker)."""
     mask = observation["mask"].astype(bool)
-    keep = mask & np.isin(observation["sensor"], np.flatnonzero(woken))
+    woken = np.asarray(woken, dtype=bool)
+    # a padding row's sensor (-1) indexes some sensor, and its mask drops it
+    keep = mask & woken[observation["sensor"]]
     n = int(keep.sum())
     measurements = np.zeros_like(observation["measurements"])
     sensor = np.full_like(observation["sensor"], -1)
@@ -34,7 +36,7 @@ def filter_reports(observation: dict, woken: np.ndarray) -> dict:
         "sensor": sensor,
         "mask": new_mask,
         "t": observation["t"],
-        "awake": np.asarray(woken, dtype=bool),
+        "awake": woken,
     }
 
 

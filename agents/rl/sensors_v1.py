@@ -218,32 +218,34 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         cost = self.wake_energy + np.where(self._awake, 0.0, self.startup_energy)
         return np.flatnonzero(self.battery_ >= cost - 1e-12)
 
-    def _wake_order(self) -> np.ndarray:
-        """The charged sensors, nearest to the prediction first."""
+    def _wake_order(self) -> tuple[np.ndarray, np.ndarray]:
+        """The charged sensors, nearest to the prediction first, and their distances (m)."""
         charged = self._charged()
-        distance = np.linalg.norm(self.inner.network.positions[charged] - self._predicted, axis=1)
-        return charged[np.argsort(distance, kind="stable")]
+        offset = self.inner.network.positions[charged] - self._predicted
+        # np.linalg.norm(offset, axis=1) to the last bit (the same two squares, one sum), in
+        # a fraction of its time: this runs at every step of every sub-environment
+        distance = np.sqrt(offset[:, 0] ** 2 + offset[:, 1] ** 2)
+        nearest_first = np.argsort(distance, kind="stable")
+        return charged[nearest_first], distance[nearest_first]
 
     def _observation(self) -> np.ndarray:
         """The observation of the coming step; keeps its wake order for ``begin_step``."""
-        self._order = order = self._wake_order()
-        nearest = order[:OBSERVED_CANDIDATES]
+        self._order, distance = self._wake_order()
+        nearest = self._order[:OBSERVED_CANDIDATES]
         per_candidate = np.zeros((OBSERVED_CANDIDATES, 3))
         per_candidate[:, 0] = 10.0  # no such sensor: far away, empty, asleep
-        distance = np.linalg.norm(self.inner.network.positions[nearest] - self._predicted, axis=1)
-        per_candidate[: nearest.size, 0] = distance / self.inner.sensing_range
+        per_candidate[: nearest.size, 0] = distance[:OBSERVED_CANDIDATES] / self.inner.sensing_range
         per_candidate[: nearest.size, 1] = self.battery_[nearest]
         per_candidate[: nearest.size, 2] = self._awake[nearest]
-        all_distance = np.linalg.norm(self.inner.network.positions[order] - self._predicted, axis=1)
         reach = self.inner.sensing_range + 2.0 * float(np.max(self._predicted_std))
-        tail = [
-            *(np.log1p(self._predicted_std) / 6.0),
-            *(self._velocity / TOP_SPEED),
-            1.0 - self._step / self.inner.n_steps,
-            min(self._silent / 10.0, 1.0),
-            np.log1p(self._last_count) / 6.0,
-            float(np.mean(self.battery_)),
-            np.sum(all_distance <= reach) / 64.0,
-        ]
-        vector = np.r_[per_candidate.ravel(), tail]
-        return np.clip(vector, -10.0, 10.0).astype(np.float32)
+        tail = np.empty(9)
+        tail[0:2] = np.log1p(self._predicted_std) / 6.0
+        tail[2:4] = self._velocity / TOP_SPEED
+        tail[4] = 1.0 - self._step / self.inner.n_steps
+        tail[5] = min(self._silent / 10.0, 1.0)
+        tail[6] = np.log1p(self._last_count) / 6.0
+        tail[7] = np.mean(self.battery_)
+        tail[8] = np.count_nonzero(distance <= reach) / 64.0
+        vector = np.concatenate((per_candidate.ravel(), tail))
+        # np.clip's numbers (nothing here is NaN), without its overhead
+        return np.minimum(np.maximum(vector, -10.0), 10.0).astype(np.float32)

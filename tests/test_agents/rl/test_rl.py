@@ -8,6 +8,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gymnasium_check_env
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -18,6 +20,7 @@ from agents.rl.evaluation import (
     baseline_policies,
     evaluate_policy_on_seeds,
 )
+from agents.rl.sensors_env import filter_reports
 from agents.rl.training import load_agent, train_agent
 
 RL_ENVS = ["DGPTrackWindow-v0", "DGPTrackGating-v0", "DGPTrackSensors-v0"]
@@ -339,3 +342,33 @@ def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
         runs.check_agent_folders([folder], config["env"], {"scenario": "S1"})
     with pytest.raises(ValueError, match="not a trained agent's folder"):
         runs.check_agent_folders([tmp_path / "cache"], config["env"], {})
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    sensor=st.lists(st.integers(0, 9), max_size=12),
+    padding=st.integers(0, 4),
+    woken=st.lists(st.booleans(), min_size=10, max_size=10),
+)
+def test_filter_reports_keeps_the_woken_sensors_rows_in_order(sensor, padding, woken):
+    """``filter_reports`` against a plain reference (np.isin over the woken sensors' ids):
+    the woken sensors' rows first, in their order, then padding (sensor -1, mask 0)."""
+    n, k = len(sensor), len(sensor) + padding
+    sensors = np.full(k, -1)
+    sensors[:n] = sensor
+    measurements = np.zeros((k, 2))
+    measurements[:n] = np.arange(2 * n).reshape(n, 2) + 0.5
+    mask = (np.arange(k) < n).astype(np.int8)
+    woken = np.array(woken)
+    reports = filter_reports(
+        {"measurements": measurements, "sensor": sensors, "mask": mask, "t": 3}, woken
+    )
+    keep = (mask == 1) & np.isin(sensors, np.flatnonzero(woken))
+    m = int(keep.sum())
+    np.testing.assert_array_equal(reports["mask"], (np.arange(k) < m).astype(np.int8))
+    np.testing.assert_array_equal(reports["sensor"][:m], sensors[keep])
+    np.testing.assert_array_equal(reports["sensor"][m:], -1)
+    np.testing.assert_array_equal(reports["measurements"][:m], measurements[keep])
+    np.testing.assert_array_equal(reports["measurements"][m:], 0.0)
+    np.testing.assert_array_equal(reports["awake"], woken)
+    assert reports["t"] == 3
