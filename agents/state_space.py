@@ -78,7 +78,8 @@ def ncv_predict(mean: np.ndarray, cov: np.ndarray, dt: float, q: np.ndarray):
     new_a = a + 2.0 * dt * b + dt * dt * d + q * dt**3 / 3.0
     new_b = b + dt * d + q * dt**2 / 2.0
     new_d = d + q * dt
-    new_cov = np.empty(np.broadcast_shapes(new_a.shape, new_b.shape, new_d.shape) + (2, 2))
+    # new_a's operands include new_b's and new_d's, so its shape is the broadcast of all three
+    new_cov = np.empty(new_a.shape + (2, 2))
     new_cov[..., 0, 0], new_cov[..., 1, 1] = new_a, new_d
     new_cov[..., 0, 1] = new_cov[..., 1, 0] = new_b
     return new_mean, new_cov

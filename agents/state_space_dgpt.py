@@ -122,6 +122,7 @@ from agents.silence import (
     silent_region,
 )
 from agents.state_space import (
+    POOLED_METHODS,
     Manoeuvre,
     PooledSummaries,
     WindowStep,
@@ -133,6 +134,8 @@ from agents.state_space import (
     fused_update,
     ncv_predict,
     pool_summaries,
+    pooled_log_likelihood,
+    pooled_update,
     process_noise_components,
     step_log_likelihood,
     turn_predict,
@@ -1444,8 +1447,17 @@ class StateSpaceDGPT(TrackerBase):
         if self.summary_variance == "mean":
             noise_var = noise_var * gated.weight_squares[..., None, :]
         summary_var = noise_var + np.swapaxes(gated.spread, -1, -2)
-        log_likelihood = step_log_likelihood(position_mean, position_var, summaries, summary_var)
-        posterior = fused_update(self.aggregation, prior_means, prior_covs, summaries, summary_var)
+        if self.aggregation in POOLED_METHODS:  # the sums serve the likelihood and the update
+            pooled = pool_summaries(summaries, summary_var)
+            log_likelihood = pooled_log_likelihood(position_mean, position_var, pooled)
+            posterior = pooled_update(self.aggregation, prior_means, prior_covs, pooled)
+        else:
+            log_likelihood = step_log_likelihood(
+                position_mean, position_var, summaries, summary_var
+            )
+            posterior = fused_update(
+                self.aggregation, prior_means, prior_covs, summaries, summary_var
+            )
         expert_means, expert_covs = expert_posteriors(
             prior_means, prior_covs, summaries, summary_var
         )
@@ -1660,9 +1672,9 @@ def _learn_pooled(trackers: Sequence[StateSpaceDGPT]) -> None:
     valid = np.zeros((length, len(trackers), 1, 1), dtype=bool)
     for column, tracker in enumerate(trackers):
         start = length - len(tracker.steps_)
-        for row, (pooled, step) in enumerate(zip(tracker.pooled_, tracker.steps_), start):
-            sums[:, row, column] = pooled
-            dt[row, column] = step.dt
+        # one copy per tracker (the window's (step, field, axis) sums), not one per step
+        sums[:, start:, column] = np.swapaxes(np.array(tracker.pooled_), 0, 1)
+        dt[start:, column, 0, 0] = [step.dt for step in tracker.steps_]
         valid[start:, column] = True
     log_q = np.stack([tracker.log_q_ for tracker in trackers])
     log_likelihood = bcm_window_log_likelihood(
