@@ -221,10 +221,10 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     def _wake_order(self) -> tuple[np.ndarray, np.ndarray]:
         """The charged sensors, nearest to the prediction first, and their distances (m)."""
         charged = self._charged()
-        offset = self.inner.network.positions[charged] - self._predicted
+        offset = self.inner.network.positions - self._predicted
         # np.linalg.norm(offset, axis=1) to the last bit (the same two squares, one sum), in
         # a fraction of its time: this runs at every step of every sub-environment
-        distance = np.sqrt(offset[:, 0] ** 2 + offset[:, 1] ** 2)
+        distance = np.sqrt(offset[:, 0] ** 2 + offset[:, 1] ** 2)[charged]
         nearest_first = np.argsort(distance, kind="stable")
         return charged[nearest_first], distance[nearest_first]
 
