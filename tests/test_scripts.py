@@ -101,12 +101,17 @@ def test_bench_prints_its_figures():
         "--only",
         "env",
         "dgpt-step",
+        "ppo",
         "--steps",
         "300",
         "--repeats",
         "1",
         "--episodes",
         "1",
+        "--ppo-steps",
+        "64",
+        "--ppo-envs",
+        "2",
     )
     assert result.returncode == 0, result.stderr
     ratio = re.search(r"ratio DGPTrack / CartPole \(goal <= 3\): ([\d.]+)", result.stdout)
@@ -114,6 +119,8 @@ def test_bench_prints_its_figures():
     for label in (r"dgpt-rbcm", r"dgpt-rbcm-trend \(window 10\)"):
         step = re.search(label + r" step, median \(ms, goal <= 1\): ([\d.]+)", result.stdout)
         assert step and float(step.group(1)) > 0
+    rate = re.search(r"steps per second: (\d+)\nminutes per 1e6 steps", result.stdout)
+    assert rate and int(rate.group(1)) > 0
 
 
 def test_train_rl_trains_saves_and_compares(tmp_path):

@@ -247,5 +247,5 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         tail[7] = np.mean(self.battery_)
         tail[8] = np.count_nonzero(distance <= reach) / 64.0
         vector = np.concatenate((per_candidate.ravel(), tail))
-        # np.clip's numbers (nothing here is NaN), without its overhead
+        # np.clip's numbers (NaN included), without its overhead
         return np.minimum(np.maximum(vector, -10.0), 10.0).astype(np.float32)
