@@ -4,7 +4,9 @@ baselines on held-out seeds.
 Saves OUT/model.zip and OUT/config.json, evaluates the agent, the best fixed baseline (grid
 search on training seeds), the default baseline, the other fixed ones and a random policy on
 held-out seeds, prints the comparison table (also OUT/comparison.md and .json) and writes
-OUT/learning_curve.png. Needs the 'rl' extra (stable-baselines3, torch).
+OUT/learning_curve.png. Prints the training's speed first: steps per second and the minutes
+that rate gives for 1e6 steps, set-up included (docs/performance.md quotes it). Needs the
+'rl' extra (stable-baselines3, torch).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import ast
 import importlib.util
 import json
 import sys
+import time
 from pathlib import Path
 
 import dgpt_gym  # noqa: F401  (registers the environments)
@@ -55,6 +58,16 @@ def add_evaluation_arguments(parser: argparse.ArgumentParser, cache: Path) -> No
         f"clear it after changing code within a version (default: {cache})",
     )
     parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")
+
+
+def training_speed(timesteps: int, seconds: float) -> str:
+    """The line ``main`` prints after training: ``timesteps`` in ``seconds``, the steps per
+    second and the minutes per 1e6 steps at that rate."""
+    rate = timesteps / seconds
+    return (
+        f"trained {timesteps} steps in {seconds:.1f} s: {rate:.0f} steps/s, "
+        f"{1e6 / rate / 60:.1f} min per 1e6 steps"
+    )
 
 
 def parse_kwargs(items: list[str]) -> dict:
@@ -140,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         env_kwargs = parse_kwargs(args.env_kwargs)
         algo_kwargs = parse_kwargs(args.algo_kwargs)
         out = args.out or Path("results") / "rl" / f"{env_id.split('-')[0]}-{args.algo}"
+        started = time.perf_counter()
         agent = train_agent(
             env_id,
             args.algo,
@@ -154,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError) as error:  # bad names, values or keyword arguments
         print(f"error: {error}", file=sys.stderr)
         return 2
+    print(training_speed(args.timesteps, time.perf_counter() - started))
     rows = compare_with_baselines(
         env_id,
         agent.model,

@@ -20,11 +20,6 @@
 - vector-env: steps per second of every RL environment with 8 sub-environments, Gymnasium's
   sync vector env against the batched one (``vectorization_mode="vector_entry_point"``, the
   trackers stepped through one ``update_batch``), checking the returns are equal. Goal >= 5.
-- ppo: PPO training on ``DGPTrackSensors-v2`` in the configuration of docs/rl.md (S1, clutter
-  rate 5) end to end (``agents.rl.training.train_agent``, ``VecNormalize``, the batched
-  environments; rollouts of 4096 steps over ``--ppo-envs`` environments, minibatches of
-  256), its steps per second and the minutes that rate gives for 1e6 steps, set-up
-  included. Goal: 1e6 steps <= 10 min on 2 cores. Needs the 'rl' extra.
 - training-time: the paper's Sec. VII-A experiment (Fig. 2): f(x) = 5 x1^2 + sin(12 x2),
   sigma_z = 0.5; likelihood + gradient of the full GP and of DGP with M = 2, 5, 10, 20
   experts, N = 500 .. 10000; writes docs/training_time.csv and docs/figures/training_time.png.
@@ -57,7 +52,6 @@ SECTIONS = [
     "ncv-step",
     "lockstep",
     "vector-env",
-    "ppo",
     "sklearn",
     "training-time",
 ]
@@ -231,36 +225,6 @@ def bench_vector_envs(num_envs: int, n_steps: int, env_ids: list[str]) -> dict:
     return results
 
 
-PPO_ENV_KWARGS = {"scenario": "S1", "clutter_rate": 5.0}
-"""The sensor task's configuration in docs/rl.md, which the ppo section trains on."""
-
-
-def bench_ppo(timesteps: int, n_envs: int) -> dict:
-    """Steps per second of PPO training on ``DGPTrackSensors-v2`` (module docstring), in a
-    temporary folder; set-up (imports, environments, network) included, so a longer run
-    is a little faster per step."""
-    import tempfile
-
-    from agents.rl.training import train_agent
-
-    started = time.perf_counter()
-    with tempfile.TemporaryDirectory() as folder:
-        train_agent(
-            "DGPTrackSensors-v2",
-            timesteps=timesteps,
-            n_envs=n_envs,
-            out=folder,
-            env_kwargs=PPO_ENV_KWARGS,
-            algo_kwargs={"n_steps": max(4096 // n_envs, 1), "batch_size": 256},
-            progress=False,
-        )
-    seconds = time.perf_counter() - started
-    return {
-        "steps per second": f"{timesteps / seconds:.0f}",
-        "minutes per 1e6 steps (goal <= 10)": f"{1e6 / (timesteps / seconds) / 60:.1f}",
-    }
-
-
 def paper_function_data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Sec. VII-A: x uniform in [0, 1]^2, z = 5 x1^2 + sin(12 x2) + N(0, 0.5^2)."""
     x = rng.uniform(size=(n, 2))
@@ -352,12 +316,6 @@ def main(argv: list[str] | None = None) -> int:
         "--vector-steps", type=int, default=300, help="vector steps of the vector-env section"
     )
     parser.add_argument(
-        "--ppo-steps", type=int, default=65536, help="training steps of the ppo section"
-    )
-    parser.add_argument(
-        "--ppo-envs", type=int, default=32, help="batched environments of the ppo section"
-    )
-    parser.add_argument(
         "--full-gp-max", type=int, default=10000, help="largest N of the full GP in training-time"
     )
     args = parser.parse_args(argv)
@@ -400,18 +358,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n## RL vector environments, 8 sub-environments, {args.vector_steps} steps")
         for key, value in bench_vector_envs(8, args.vector_steps, env_ids).items():
             print(f"{key}: {value}")
-    if "ppo" in args.only:
-        print(
-            f"\n## PPO on DGPTrackSensors-v2 {PPO_ENV_KWARGS}, {args.ppo_steps} steps, "
-            f"{args.ppo_envs} batched environments"
-        )
-        try:
-            import stable_baselines3  # noqa: F401
-        except ImportError:
-            print("skipped: needs the 'rl' extra (pip install -e '.[rl]')")
-        else:
-            for key, value in bench_ppo(args.ppo_steps, args.ppo_envs).items():
-                print(f"{key}: {value}")
     if "sklearn" in args.only:
         print("\n## full-GP log marginal likelihood + gradient versus scikit-learn")
         for key, value in bench_sklearn([1000, 2000, 4000], repeats=3).items():
