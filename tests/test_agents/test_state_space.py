@@ -981,3 +981,64 @@ def test_the_learnt_q_stops_on_its_floor():
     floor = np.log(PROCESS_NOISE_BOUNDS[0])
     assert np.min(log_q) == floor
     assert np.sum(np.array(log_q) == floor) > 10
+
+
+@pytest.mark.parametrize("aggregation", ["bcm", "poe", "rbcm"])
+def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregation):
+    """On every step with data of an S3 episode at clutter 5 (so several sensors and the
+    manoeuvre's two process-noise components): each hypothesis's log weight is its log
+    prior plus, per axis, the log density of its M summaries under its prediction,
+    N(mu 1, p 1 1^T + diag(s)) by scipy; and its posterior is the aggregation's in
+    information form, from explicit inverses (for BCM the Kalman update with all M
+    summaries at once)."""
+    tracker = StateSpaceDGPT(aggregation=aggregation)
+    recorded = {}
+    own_hypotheses = tracker._hypotheses
+
+    def recording(points, sensors, prior_means, prior_covs, log_priors, *rest):
+        recorded["prior"] = (prior_means, prior_covs, log_priors)
+        recorded["hypotheses"] = own_hypotheses(
+            points, sensors, prior_means, prior_covs, log_priors, *rest
+        )
+        return recorded["hypotheses"]
+
+    tracker._hypotheses = recording
+    env = gym.make("DGPTrack-v0", scenario="S3", clutter_rate=5.0)
+    obs, info = env.reset(seed=1001)
+    tracker.reset(info["problem_spec"], seed=1001)
+    checked = several = 0
+    for _ in range(60):
+        recorded.clear()
+        estimate = tracker.update(obs)
+        if "hypotheses" in recorded:
+            prior_means, prior_covs, log_priors = recorded["prior"]
+            own = recorded["hypotheses"]
+            for h in range(len(log_priors)):
+                expected = log_priors[h]
+                for axis in range(2):
+                    z = own["summaries"][h, axis]
+                    s = own["summary_var"][h, axis]
+                    p = prior_covs[h, axis, 0, 0]
+                    expected += multivariate_normal.logpdf(
+                        z, np.full(z.size, prior_means[h, axis, 0]), p + np.diag(s)
+                    )
+                    # eqs. (8)-(20) in information form with explicit inverses: precision
+                    # a P0^-1 + sum_i beta_i e1 e1^T / s_i (a = M for PoE, else 1; beta_i
+                    # eq. (11) for RBCM with several experts, else 1)
+                    prior_precision = np.linalg.inv(prior_covs[h, axis])
+                    beta = np.ones(z.size)
+                    if aggregation == "rbcm" and z.size > 1:
+                        beta = 0.5 * np.log1p(p / s)
+                    a = z.size if aggregation == "poe" else 1.0
+                    precision = a * prior_precision
+                    precision[0, 0] += np.sum(beta / s)
+                    information = a * prior_precision @ prior_means[h, axis]
+                    information[0] += np.sum(beta * z / s)
+                    cov = np.linalg.inv(precision)
+                    np.testing.assert_allclose(own["mean"][h, axis], cov @ information, rtol=1e-9)
+                    np.testing.assert_allclose(own["cov"][h, axis], cov, rtol=1e-7, atol=1e-9)
+                np.testing.assert_allclose(own["log_weight"][h], expected, rtol=1e-9)
+            checked += 1
+            several += own["summaries"].shape[-1] >= 2
+        obs, *_ = env.step(estimate.mean)
+    assert checked >= 40 and several >= 20
