@@ -110,6 +110,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--n-envs", type=int, default=4, help="vectorized training envs (default: 4)"
     )
     parser.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="processes stepping the training envs, each a block of them (default: 1, this "
+        "process); the trained model does not depend on it. 2 on a 2-core machine trains "
+        "about 1.1-1.2x faster (docs/performance.md)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=None, help="output folder (default: results/rl/<env>-<algo>)"
     )
     parser.add_argument(
@@ -164,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             env_kwargs,
             algo_kwargs,
             progress=not args.no_progress,
+            workers=args.workers,
         )
     except (ValueError, TypeError) as error:  # bad names, values or keyword arguments
         print(f"error: {error}", file=sys.stderr)

@@ -29,6 +29,7 @@ from agents.rl.evaluation import (
     evaluate_policy_on_seeds,
     summarize_episodes,
 )
+from agents.rl.process_blocks import process_blocks_vec_env
 from agents.rl.registration import ENVIRONMENTS
 from agents.rl.vector import stable_baselines_vec_env
 from dgpt_gym.benchmark.plots import new_figure, save_figure
@@ -132,6 +133,7 @@ def train_agent(
     progress: bool = True,
     torch_threads: int = 1,
     normalize: bool = True,
+    workers: int = 1,
 ) -> TrainedAgent:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps over ``n_envs`` environments whose
     trackers step in lockstep (:func:`agents.rl.vector.stable_baselines_vec_env`; a
@@ -143,7 +145,10 @@ def train_agent(
     :class:`agents.rl.evaluation.ModelPolicy`). TensorBoard logs go to ``out/tensorboard``
     when tensorboard is installed. ``torch_threads``: the policy networks are tiny, and
     more than one torch or BLAS thread only adds synchronisation (``torch.set_num_threads``,
-    ``threadpoolctl``); both limits stay set for the process."""
+    ``threadpoolctl``); both limits stay set for the process. ``workers``: processes that
+    step the environments, each a contiguous block of them in lockstep
+    (:class:`agents.rl.process_blocks.ProcessBlocksVecEnv`; 1 steps them in this process).
+    The environments' numbers, and so the trained model, do not depend on it."""
     import torch
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -165,7 +170,13 @@ def train_agent(
     out = Path(out)
     (out / "monitor").mkdir(parents=True, exist_ok=True)
     check_bool("normalize", normalize)
-    venv = stable_baselines_vec_env(env_id, n_envs, TRAINING_ENV_SEED + seed * n_envs, env_kwargs)
+    if check_integer("workers", workers, low=1) > n_envs:
+        raise ValueError(f"workers must be at most n_envs = {n_envs}; got {workers}")
+    env_seed = TRAINING_ENV_SEED + seed * n_envs
+    if workers == 1:
+        venv = stable_baselines_vec_env(env_id, n_envs, env_seed, env_kwargs)
+    else:
+        venv = process_blocks_vec_env(env_id, n_envs, env_seed, env_kwargs, workers)
     venv = VecMonitor(venv, filename=str(out / "monitor" / "train"))
     if normalize:
         venv = VecNormalize(venv)
@@ -197,7 +208,7 @@ def train_agent(
         "timesteps": timesteps,
         "seed": seed,
         "n_envs": n_envs,
-        "training_env_seed": TRAINING_ENV_SEED + seed * n_envs,
+        "training_env_seed": env_seed,
         "normalize": normalize,
     }
     (out / "config.json").write_text(json.dumps(config, indent=1) + "\n")
