@@ -115,6 +115,30 @@ def short_ppo(tmp_path):
     return train
 
 
+def step_vec_envs_alike(venv, reference, steps: int, rng) -> int:
+    """Step two Stable-Baselines3 ``VecEnv`` s with the same random actions for ``steps``
+    steps, asserting equal observations, rewards, dones, the tracker's error (a float64 the
+    float32 observations and rewards would round away), time-limit flags and terminal
+    observations; returns the number of episode ends."""
+    dones = 0
+    for _ in range(steps):
+        actions = rng.integers(0, reference.action_space.n, reference.num_envs)
+        got, want = venv.step(actions), reference.step(actions)
+        for a, b in zip(got[:3], want[:3]):
+            np.testing.assert_array_equal(a, b)
+        assert len(got[3]) == len(want[3])
+        for info_a, info_b in zip(got[3], want[3]):
+            assert info_a["error"] == info_b["error"]
+            assert info_a["TimeLimit.truncated"] == info_b["TimeLimit.truncated"]
+            assert ("terminal_observation" in info_a) == ("terminal_observation" in info_b)
+            if "terminal_observation" in info_b:
+                np.testing.assert_array_equal(
+                    info_a["terminal_observation"], info_b["terminal_observation"]
+                )
+        dones += int(got[2].sum())
+    return dones
+
+
 def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None, region=None):
     """The exact posterior by enumeration: every subset S of target points (with sensors,
     only the subsets with a point of every sensor), weight c^(n - |S|) lambda_T^|S| times

@@ -119,8 +119,8 @@ def test_bench_prints_its_figures():
 def test_train_rl_trains_saves_and_compares(tmp_path):
     result = run_script(
         "train_rl.py",
-        *("--env", "sensors", "--algo", "a2c", "--timesteps", "64", "--n-envs", "1"),
-        *("--env-kwargs", "n_candidates=2", "max_episode_steps=15"),
+        *("--env", "sensors", "--algo", "a2c", "--timesteps", "64", "--n-envs", "2"),
+        *("--workers", "2", "--env-kwargs", "n_candidates=2", "max_episode_steps=15"),
         *("--eval-episodes", "2", "--out", str(tmp_path), "--no-progress"),
     )
     assert result.returncode == 0, result.stderr
@@ -137,6 +137,8 @@ def test_train_rl_rejects_bad_choices():
     assert result.returncode == 2 and "window" in result.stderr
     result = run_script("train_rl.py", "--env", "gating", "--algo", "dqn", "--timesteps", "8")
     assert result.returncode == 2 and "Discrete" in result.stderr
+    result = run_script("train_rl.py", "--n-envs", "2", "--workers", "3", "--timesteps", "8")
+    assert result.returncode == 2 and "workers must be at most n_envs = 2" in result.stderr
 
 
 USER_TRACKER = """

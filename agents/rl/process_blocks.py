@@ -6,10 +6,12 @@ on one core; PPO's rollouts spend most of their time there (docs/performance.md)
 ``SubprocVecEnv`` puts one environment in each process, which gives up the lockstep
 batching of the trackers' learning. :func:`process_blocks_vec_env` splits the ``n_envs``
 sub-environments into ``workers`` contiguous blocks, and worker k holds block k as its own
-batched ``VecEnv`` (``stable_baselines_vec_env`` with the block's first seed). Each
-sub-environment's numbers do not depend on its block (each tracker's numbers are bit for bit
-those of its episode alone, :meth:`~dgpt_gym.tracker.TrackerBase.update_batch`), so the whole
-equals the one-process ``VecEnv`` step for step: observations, rewards, dones and infos.
+batched ``VecEnv`` (``stable_baselines_vec_env``), pinned to a core of its own
+(:func:`worker_cores`). Each sub-environment's numbers do not depend on its block (each
+tracker's numbers are bit for bit those of its episode alone,
+:meth:`~dgpt_gym.tracker.TrackerBase.update_batch`), so the whole equals the one-process
+``VecEnv`` step for step: observations, rewards, dones and infos; a model trained on it is
+the one trained in one process.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import os
 from functools import partial
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.rl.vector import stable_baselines_vec_env
 from dgpt_gym.validation import check_integer
@@ -42,10 +45,10 @@ def block_bounds(n_envs: int, workers: int) -> list[tuple[int, int]]:
 def worker_cores(workers: int) -> list[int | None]:
     """The core each of ``workers`` processes is pinned to: one core of this process's
     affinity mask each, in order, where the platform can pin (Linux) and there are at least
-    as many cores as workers; else None (the scheduler places them). Unpinned, two workers
-    on this project's 2-core machine took 9.5-12.5 ms per step of a 16-environment block
-    inside PPO, pinned 8.6-9.8 ms: the scheduler moved them between the cores, whose L2
-    caches are their own (docs/performance.md)."""
+    as many cores as workers; else None (the scheduler places them). Unpinned, the scheduler
+    moved two workers between the two cores of this project's machine, whose L2 caches are
+    their own, and a worker's step took about 1.3x as long inside PPO
+    (docs/performance.md)."""
     if not hasattr(os, "sched_setaffinity"):
         return [None] * workers
     cores = sorted(os.sched_getaffinity(0))
@@ -56,8 +59,6 @@ def _serve(remote, parent_remote, make_block, core: int | None) -> None:
     """A worker's loop: pinned to ``core`` (unless None), build its block's ``VecEnv`` and
     run the parent's commands ``(command, args)`` on it until "close"; each reply is
     ``(True, value)``, or ``(False, exception)`` for the parent to raise."""
-    from threadpoolctl import threadpool_limits
-
     parent_remote.close()
     if core is not None:
         os.sched_setaffinity(0, {core})
@@ -118,8 +119,9 @@ def process_blocks_vec_env(
     ``seed + i`` at the first reset, as in
     :func:`~agents.rl.vector.stable_baselines_vec_env`. Worker processes start by
     ``start_method`` (multiprocessing's; by default SB3's ``SubprocVecEnv``'s, "forkserver"
-    where the platform has it, else "spawn"); ``close`` ends them. An exception in a worker
-    is raised in this process. Needs the 'rl' extra."""
+    where the platform has it, else "spawn"; as with ``SubprocVecEnv``, a script that makes
+    one needs the ``if __name__ == "__main__":`` guard); ``close`` ends them. An exception
+    in a worker is raised in this process. Needs the 'rl' extra."""
     from stable_baselines3.common.vec_env import VecEnv
 
     blocks = block_bounds(n_envs, workers)

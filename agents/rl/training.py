@@ -147,7 +147,7 @@ def train_agent(
     more than one torch or BLAS thread only adds synchronisation (``torch.set_num_threads``,
     ``threadpoolctl``); both limits stay set for the process. ``workers``: processes that
     step the environments, each a contiguous block of them in lockstep
-    (:class:`agents.rl.process_blocks.ProcessBlocksVecEnv`; 1 steps them in this process).
+    (:func:`agents.rl.process_blocks.process_blocks_vec_env`; 1 steps them in this process).
     The environments' numbers, and so the trained model, do not depend on it."""
     import torch
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -170,8 +170,6 @@ def train_agent(
     out = Path(out)
     (out / "monitor").mkdir(parents=True, exist_ok=True)
     check_bool("normalize", normalize)
-    if check_integer("workers", workers, low=1) > n_envs:
-        raise ValueError(f"workers must be at most n_envs = {n_envs}; got {workers}")
     env_seed = TRAINING_ENV_SEED + seed * n_envs
     if workers == 1:
         venv = stable_baselines_vec_env(env_id, n_envs, env_seed, env_kwargs)

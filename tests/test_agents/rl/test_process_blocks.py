@@ -6,6 +6,7 @@ import os
 
 import numpy as np
 import pytest
+from conftest import step_vec_envs_alike
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -55,10 +56,9 @@ def test_workers_are_pinned_to_distinct_cores_when_there_are_enough():
 
 def test_process_blocks_equal_the_one_process_vec_env():
     """Five environments in two workers (blocks of 3 and 2) against the one-process batched
-    VecEnv with the same seeds: observations, rewards, dones, the tracker's error (float64),
-    the time limit's flags and terminal observations over 80 steps of 25-step episodes (so
-    several autoresets), then again after a reseeding reset. Attribute access returns each
-    environment's own value in the order asked for, across the blocks."""
+    VecEnv with the same seeds (:func:`conftest.step_vec_envs_alike`) over 80 steps of
+    25-step episodes (so several autoresets), then again after a reseeding reset. Attribute
+    access returns each environment's own value in the order asked for, across the blocks."""
     n, seed = 5, 21
     kwargs = {"scenario": "S2", "clutter_rate": 5.0, "max_episode_steps": 25}
     reference = stable_baselines_vec_env("DGPTrackWindow-v0", n, seed, kwargs)
@@ -70,22 +70,7 @@ def test_process_blocks_equal_the_one_process_vec_env():
                 reference.seed(reset_seed)
                 blocks.seed(reset_seed)
             np.testing.assert_array_equal(blocks.reset(), reference.reset())
-            dones = 0
-            for _ in range(80):
-                actions = rng.integers(0, reference.action_space.n, n)
-                got, want = blocks.step(actions), reference.step(actions)
-                for a, b in zip(got[:3], want[:3]):
-                    np.testing.assert_array_equal(a, b)
-                assert len(got[3]) == n
-                for info_a, info_b in zip(got[3], want[3]):
-                    assert info_a["error"] == info_b["error"]
-                    assert info_a["TimeLimit.truncated"] == info_b["TimeLimit.truncated"]
-                    assert ("terminal_observation" in info_a) == ("terminal_observation" in info_b)
-                    if "terminal_observation" in info_b:
-                        np.testing.assert_array_equal(
-                            info_a["terminal_observation"], info_b["terminal_observation"]
-                        )
-                dones += int(got[2].sum())
+            dones = step_vec_envs_alike(blocks, reference, 80, rng)
             assert dones == 15  # 80 steps of 25-step episodes, in 5 environments
         # the seeds of the last reset, per environment, asked for across both blocks
         assert blocks.get_attr("np_random_seed", [4, 0, 2]) == [7 + 4, 7, 7 + 2]

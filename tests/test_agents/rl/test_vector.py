@@ -4,6 +4,7 @@ vectorization_mode="vector_entry_point")`` equals N single environments step for
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import step_vec_envs_alike
 
 import dgpt_gym  # noqa: F401  (registers the environments)
 from agents.rl.registration import ENVIRONMENTS
@@ -91,19 +92,5 @@ def test_the_stable_baselines_vec_env_equals_dummy_vec_env():
     reference = DummyVecEnv([lambda: gym.make("DGPTrackWindow-v0", **kwargs)] * n)
     reference.seed(21)
     np.testing.assert_array_equal(batched.reset(), reference.reset())
-    rng = np.random.default_rng(0)
-    dones = 0
-    for _ in range(80):
-        actions = rng.integers(0, batched.action_space.n, n)
-        got, want = batched.step(actions), reference.step(actions)
-        for a, b in zip(got[:3], want[:3]):
-            np.testing.assert_array_equal(a, b)
-        for info_a, info_b in zip(got[3], want[3]):
-            assert info_a["TimeLimit.truncated"] == info_b["TimeLimit.truncated"]
-            assert info_a["error"] == info_b["error"]
-            if "terminal_observation" in info_b:
-                np.testing.assert_array_equal(
-                    info_a["terminal_observation"], info_b["terminal_observation"]
-                )
-        dones += int(got[2].sum())
+    dones = step_vec_envs_alike(batched, reference, 80, np.random.default_rng(0))
     assert dones == 9  # 80 steps of 25-step episodes, in 3 environments
