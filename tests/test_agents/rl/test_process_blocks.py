@@ -57,13 +57,18 @@ def test_workers_are_pinned_to_distinct_cores_when_there_are_enough():
 def test_process_blocks_equal_the_one_process_vec_env():
     """Five environments in two workers (blocks of 3 and 2) against the one-process batched
     VecEnv with the same seeds (:func:`conftest.step_vec_envs_alike`) over 80 steps of
-    25-step episodes (so several autoresets), then again after a reseeding reset. Attribute
-    access returns each environment's own value in the order asked for, across the blocks."""
+    25-step episodes (so several autoresets), then again after a reseeding reset. Each worker
+    is pinned to its core; attribute access returns each environment's own value in the
+    order asked for, across the blocks."""
     n, seed = 5, 21
     kwargs = {"scenario": "S2", "clutter_rate": 5.0, "max_episode_steps": 25}
     reference = stable_baselines_vec_env("DGPTrackWindow-v0", n, seed, kwargs)
     blocks = process_blocks_vec_env("DGPTrackWindow-v0", n, seed, kwargs, workers=2)
     try:
+        if hasattr(os, "sched_getaffinity"):  # each worker runs where worker_cores put it
+            for process, core in zip(blocks.processes, worker_cores(2)):
+                expected = os.sched_getaffinity(0) if core is None else {core}
+                assert os.sched_getaffinity(process.pid) == expected
         rng = np.random.default_rng(0)
         for reset_seed in (None, 7):
             if reset_seed is not None:
