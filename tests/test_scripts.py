@@ -548,3 +548,10 @@ def test_train_rl_reports_its_speed_by_hand():
     # 65536 / 40 = 1638.4 steps/s; 1e6 / 1638.4 / 60 = 10.17 min
     expected = "trained 65536 steps in 40.0 s: 1638 steps/s, 10.2 min per 1e6 steps"
     assert training_speed(65536, 40.0) == expected
+
+
+def test_train_rl_keeps_each_seeds_agent_in_its_own_folder():
+    from agents.rl.cli import default_output_folder
+
+    folders = {default_output_folder("DGPTrackWindow-v0", "ppo", seed) for seed in range(3)}
+    assert Path("results/rl/DGPTrackWindow-ppo-seed1") in folders and len(folders) == 3

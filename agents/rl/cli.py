@@ -70,6 +70,12 @@ def training_speed(timesteps: int, seconds: float) -> str:
     )
 
 
+def default_output_folder(env_id: str, algo: str, seed: int) -> Path:
+    """Where ``main`` saves an agent without ``--out``: one folder per task, algorithm and
+    seed, so that a training with another seed does not overwrite a finished one."""
+    return Path("results") / "rl" / f"{env_id.split('-')[0]}-{algo}-seed{seed}"
+
+
 def parse_kwargs(items: list[str]) -> dict:
     """``["scenario=S3", "clutter_rate=5"]`` -> ``{"scenario": "S3", "clutter_rate": 5}``
     (values are Python literals where they parse as one, else strings)."""
@@ -118,7 +124,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "trained 1.25-1.3x faster on 2 cores (docs/performance.md)",
     )
     parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: results/rl/<env>-<algo>)"
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder (default: results/rl/<env>-<algo>-seed<seed>, so that trainings "
+        "with other seeds keep their own)",
     )
     parser.add_argument(
         "--env-kwargs",
@@ -160,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"eval-episodes must be >= 2; got {args.eval_episodes}")
         env_kwargs = parse_kwargs(args.env_kwargs)
         algo_kwargs = parse_kwargs(args.algo_kwargs)
-        out = args.out or Path("results") / "rl" / f"{env_id.split('-')[0]}-{args.algo}"
+        out = args.out or default_output_folder(env_id, args.algo, args.seed)
         started = time.perf_counter()
         agent = train_agent(
             env_id,

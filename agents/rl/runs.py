@@ -58,7 +58,18 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
 
 def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: dict) -> None:
     """``ValueError`` naming the first folder that is not an agent saved by
-    :func:`agents.rl.training.train_agent` for ``env_id`` with exactly ``env_kwargs``."""
+    :func:`agents.rl.training.train_agent` for ``env_id`` with exactly ``env_kwargs``, or
+    the first name two folders share: the reports label an agent's rows by its folder's
+    name, so one agent's rows would replace the other's."""
+    folders = [Path(folder) for folder in folders]
+    seen = {}
+    for folder in folders:
+        if folder.name in seen:
+            raise ValueError(
+                f"{seen[folder.name]} and {folder} have the same name, which labels an "
+                "agent's rows; give each agent a folder of its own name"
+            )
+        seen[folder.name] = folder
     for folder in folders:
         config_path = Path(folder) / "config.json"
         if not config_path.is_file() or not (Path(folder) / "model.zip").is_file():

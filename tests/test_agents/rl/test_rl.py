@@ -342,6 +342,10 @@ def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
         runs.check_agent_folders([folder], config["env"], {"scenario": "S1"})
     with pytest.raises(ValueError, match="not a trained agent's folder"):
         runs.check_agent_folders([tmp_path / "cache"], config["env"], {})
+    namesake = tmp_path / "other" / "agent"
+    shutil.copytree(folder, namesake)
+    with pytest.raises(ValueError, match="same name"):
+        runs.check_agent_folders([folder, namesake], config["env"], config["env_kwargs"])
 
 
 @settings(max_examples=60, deadline=None)
