@@ -48,7 +48,7 @@ import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
 from agents.rl.cli import TUNING_ENV_IDS, TUNING_TASK_KWARGS, parse_kwargs  # noqa: E402
 from agents.rl.evaluation import paired_interval  # noqa: E402
-from agents.rl.runs import best_fixed_setting, cached_json, run_policies  # noqa: E402
+from agents.rl.runs import best_fixed_setting, cached_json, code_digest, run_policies  # noqa: E402
 
 LEAF_SIZES = (50, 200, 800)
 """Minimum samples per leaf tried for the tree (about 150 steps per seed)."""
@@ -92,7 +92,7 @@ def best_fixed_records(task) -> dict[str, list]:
 
 def cached_records(task_and_cache) -> dict[str, list]:
     task, cache = task_and_cache
-    key = json.dumps([dgpt_gym.__version__, *task], sort_keys=True, default=str)
+    key = json.dumps([code_digest(), *task], sort_keys=True, default=str)
     path = cache / f"records-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
     return cached_json(path, lambda: best_fixed_records(task))
 

@@ -5,6 +5,7 @@ finishes (``scripts/sensors_baselines.py``, ``scripts/tuning_baselines.py``)."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -15,10 +16,12 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+import agents
+import baselines
+import dgpt_gym
 from agents.rl.clairvoyant import GreedyClairvoyantPolicy
 from agents.rl.evaluation import ConstantPolicy, ModelPolicy, RandomPolicy, run_policy_episode
 from agents.rl.training import load_agent
-from dgpt_gym import __version__
 
 __all__ = [
     "AGENT_FILES",
@@ -28,7 +31,13 @@ __all__ = [
     "best_fixed_setting",
     "tune_rules",
     "cached_json",
+    "source_digest",
+    "code_digest",
 ]
+
+SOURCE_SUFFIXES = (".py", ".json", ".csv")
+"""The files of a package whose change can change an episode: code and the data it reads
+(tuned windows, the paper's tables)."""
 
 AGENT_FILES = ("model.zip", "config.json", "vecnormalize.pkl")
 """What :func:`agents.rl.training.train_agent` saves of an agent (the last one only with
@@ -99,10 +108,34 @@ def _run_block(task) -> list[dict]:
     return rows
 
 
+def source_digest(roots: Iterable[Path]) -> str:
+    """SHA-256 over the files under ``roots`` whose names end in :data:`SOURCE_SUFFIXES`,
+    each with its path relative to its root, in sorted order."""
+    digest = hashlib.sha256()
+    for root in roots:
+        root = Path(root)
+        paths = sorted(
+            path
+            for path in root.rglob("*")
+            if path.suffix in SOURCE_SUFFIXES and "__pycache__" not in path.parts
+        )
+        for path in paths:
+            name = f"{root.name}/{path.relative_to(root).as_posix()}"
+            digest.update(name.encode() + b"\0" + hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+@functools.cache
+def code_digest() -> str:
+    """:func:`source_digest` of the packages an episode runs (the environments, the
+    trackers, the baselines), once per process."""
+    return source_digest(Path(package.__file__).parent for package in (agents, baselines, dgpt_gym))
+
+
 def _cache_file(cache: Path, task) -> Path:
-    """Where a task's rows are kept: named by a hash of the package version, the policy
-    (an agent by the bytes of its saved files), the environment and the seeds. Code changes
-    within a version are not in the key: clear the folder after one."""
+    """Where a task's rows are kept: named by a hash of the code (:func:`code_digest`, so
+    that an edit to a tracker or an environment cannot return stale rows), the policy (an
+    agent by the bytes of its saved files), the environment and the seeds."""
     kind, setting, env_id, env_kwargs, seeds, _ = task
     if kind == "agent":
         digest = hashlib.sha256()
@@ -114,7 +147,7 @@ def _cache_file(cache: Path, task) -> Path:
     elif isinstance(setting, np.ndarray):
         setting = setting.tolist()
     key = json.dumps(
-        [__version__, kind, setting, env_id, env_kwargs, seeds],
+        [code_digest(), kind, setting, env_id, env_kwargs, seeds],
         sort_keys=True,
         default=str,
     )

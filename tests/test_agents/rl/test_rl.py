@@ -314,6 +314,38 @@ def test_run_policies_keeps_each_policys_episodes_and_reads_them_back(tmp_path, 
         runs.run_policies([("constant", 1)], *arguments, [0, 2], 1, cache=tmp_path)
 
 
+def test_cached_episodes_are_keyed_by_the_code(tmp_path, monkeypatch):
+    """Rows cached under one version of the code are not read back under another."""
+    from agents.rl import runs
+
+    arguments = ("DGPTrackWindow-v0", {"scenario": "S3", "max_episode_steps": 3})
+    runs.run_policies([("constant", 1)], *arguments, [0], 1, cache=tmp_path)
+    monkeypatch.setattr(runs, "code_digest", lambda: "edited")
+    runs.run_policies([("constant", 1)], *arguments, [0], 1, cache=tmp_path)
+    assert len(list(tmp_path.glob("*.json"))) == 2
+
+
+def test_source_digest_follows_each_source_file_and_its_path(tmp_path):
+    """The digest changes with a source file's bytes or its path, and not with compiled
+    files or files of other kinds."""
+    from agents.rl.runs import source_digest
+
+    package = tmp_path / "package"
+    (package / "sub").mkdir(parents=True)
+    (package / "a.py").write_text("x = 1\n")
+    (package / "sub" / "windows.json").write_text("{}")
+    first = source_digest([package])
+    (package / "__pycache__").mkdir()
+    (package / "__pycache__" / "a.py").write_text("compiled")
+    (package / "notes.txt").write_text("not code")
+    assert source_digest([package]) == first
+    (package / "sub" / "windows.json").write_text('{"S1": 3}')
+    second = source_digest([package])
+    assert second != first
+    (package / "sub" / "windows.json").rename(package / "windows.json")
+    assert source_digest([package]) not in (first, second)
+
+
 def test_an_agents_cached_episodes_are_keyed_by_its_saved_files(tmp_path):
     """An agent folder as train_rl.py leaves it (with its monitor/ folder) is cached by its
     saved files: the same files read back the same rows, a changed model.zip is another
