@@ -37,8 +37,8 @@ import gymnasium as gym  # noqa: E402
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from agents.rl.clairvoyant import GreedyClairvoyantPolicy  # noqa: E402
 from agents.rl.evaluation import ModelPolicy  # noqa: E402
-from agents.rl.features import FEATURE_NAMES  # noqa: E402
-from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, DGPTrackSensorsV1Env  # noqa: E402
+from agents.rl.features import decode_features  # noqa: E402
+from agents.rl.sensors_v1 import DGPTrackSensorsV1Env, decode_observation  # noqa: E402
 from agents.rl.training import load_agent  # noqa: E402
 
 SENSOR_SITUATIONS = ("sigma < 10 m", "sigma 10-30 m", "sigma > 30 m", "after a silent step")
@@ -48,30 +48,28 @@ TUNING_SITUATIONS = (
     "surprise (innovation > 10 m)",
     "after a silent step",
 )
-FEATURE = {name: index for index, name in enumerate(FEATURE_NAMES)}
 
 
 def sensor_situation(observation: np.ndarray) -> str:
-    tail = observation[3 * OBSERVED_CANDIDATES :]
-    if round(float(tail[5]) * 10) >= 1:
+    seen = decode_observation(observation)
+    if seen.silent_steps >= 1:
         return SENSOR_SITUATIONS[3]
-    sigma = float(np.max(np.expm1(6.0 * tail[0:2])))
     return (
         SENSOR_SITUATIONS[0]
-        if sigma < 10
+        if seen.sigma < 10
         else SENSOR_SITUATIONS[1]
-        if sigma < 30
+        if seen.sigma < 30
         else SENSOR_SITUATIONS[2]
     )
 
 
 def tuning_situation(observation: np.ndarray) -> str:
-    if observation[FEATURE["silent_steps"]] >= 0.1 - 1e-6:
+    seen = decode_features(observation)
+    if seen.silent_steps >= 1:
         return TUNING_SITUATIONS[3]
-    if observation[FEATURE["innovation"]] > 0.2:
+    if seen.innovation > 0.2:  # 10 m at the default sensing range of 50 m
         return TUNING_SITUATIONS[2]
-    experts = round(float(observation[FEATURE["n_experts"]]) * 10)
-    return TUNING_SITUATIONS[0] if experts <= 2 else TUNING_SITUATIONS[1]
+    return TUNING_SITUATIONS[0] if seen.n_experts <= 2 else TUNING_SITUATIONS[1]
 
 
 def tally(env: gym.Env, policy, seeds: range, counts: dict) -> tuple[str, ...]:

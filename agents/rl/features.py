@@ -3,12 +3,20 @@ after a step, fixed-size and scaled to about [0, 1] (nothing here comes from the
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from agents.dgpt import DGPT, HYPERPARAMETER_BOUNDS
 from dgpt_gym.tracker import Estimate
 
-__all__ = ["tracker_features", "FEATURE_NAMES", "FEATURE_HIGH"]
+__all__ = [
+    "tracker_features",
+    "FEATURE_NAMES",
+    "FEATURE_HIGH",
+    "TrackerObservation",
+    "decode_features",
+]
 
 FEATURE_NAMES = (
     "n_experts",  # active experts / 10
@@ -30,6 +38,32 @@ FEATURE_HIGH = 10.0
 """Upper bound of every feature (they are clipped to [0, FEATURE_HIGH])."""
 
 _ORDER = ("signal_var", "space_lengthscale", "time_lengthscale", "noise_var")
+_INDEX = {name: index for index, name in enumerate(FEATURE_NAMES)}
+# scales shared by tracker_features and decode_features
+_EXPERT_SCALE = 10.0  # active experts / 10
+_SILENT_SCALE = 10.0  # steps since the last measurement / 10
+
+
+class TrackerObservation(NamedTuple):
+    """What the rules and the action tables read of a tuning task's observation."""
+
+    n_experts: int
+    """Active experts."""
+    innovation: float
+    """Mean distance of the last step's gated summaries from their predictions, in sensing
+    ranges (0 when the gate left none)."""
+    silent_steps: int
+    """Steps since the last measurement."""
+
+
+def decode_features(observation) -> TrackerObservation:
+    """The inverse of :func:`tracker_features`' scaling for the fields of
+    :class:`TrackerObservation`."""
+    return TrackerObservation(
+        n_experts=round(float(observation[_INDEX["n_experts"]]) * _EXPERT_SCALE),
+        innovation=float(observation[_INDEX["innovation"]]),
+        silent_steps=round(float(observation[_INDEX["silent_steps"]]) * _SILENT_SCALE),
+    )
 
 
 def _log_scaled(value: np.ndarray, scale: float) -> np.ndarray:
@@ -67,7 +101,7 @@ def tracker_features(
     distance = float(np.mean(np.hypot(*innovation.T))) if innovation.size else 0.0
     vector = np.concatenate(
         [
-            [tracker.n_experts_ / 10.0, np.log1p(n_next_measurements) / 4.0],
+            [tracker.n_experts_ / _EXPERT_SCALE, np.log1p(n_next_measurements) / 4.0],
             _log_scaled(std, 6.0),
             _log_scaled(ucb, 6.0),
             [
@@ -75,7 +109,7 @@ def tracker_features(
                 np.log1p(tracker.last_gated_out_) / 4.0,
                 window_position,
                 threshold_position,
-                silent_steps / 10.0,
+                silent_steps / _SILENT_SCALE,
             ],
             hyperparameter_features(tracker),
         ]

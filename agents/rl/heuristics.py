@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, WAKE_COUNTS
+from agents.rl.sensors_v1 import OBSERVED_CANDIDATES, WAKE_COUNTS, decode_observation
 
 __all__ = ["UncertaintyRadiusPolicy", "SilenceSearchPolicy", "level_for", "HEURISTIC_GRIDS"]
 
@@ -17,17 +17,6 @@ def level_for(count: int) -> int:
     return int(np.searchsorted(_COUNTS, count))
 
 
-def _decode(observation: np.ndarray):
-    """Distances of the 16 nearest charged sensors (in sensing ranges), the predictive
-    standard deviation (m, the larger axis), the silent steps / 10 and the count of charged
-    sensors within r + 2 sigma."""
-    observation = np.asarray(observation, dtype=float)
-    distances = observation[0 : 3 * OBSERVED_CANDIDATES : 3]
-    tail = observation[3 * OBSERVED_CANDIDATES :]
-    sigma = float(np.max(np.expm1(6.0 * tail[0:2])))
-    return distances, sigma, tail[5], tail[8] * 64.0
-
-
 class UncertaintyRadiusPolicy:
     """Wake the charged sensors within ``range + k sigma`` of the prediction (sigma its
     larger predictive standard deviation), at least one; beyond the 16 observed sensors it
@@ -37,11 +26,11 @@ class UncertaintyRadiusPolicy:
         self.k, self.sensing_range = float(k), float(sensing_range)
 
     def predict(self, observation):
-        distances, sigma, _, within_two_sigma = _decode(observation)
-        radius = (self.sensing_range + self.k * sigma) / self.sensing_range
-        count = int(np.sum(distances <= radius))
+        seen = decode_observation(observation)
+        radius = (self.sensing_range + self.k * seen.sigma) / self.sensing_range
+        count = int(np.sum(seen.distances <= radius))
         if count == OBSERVED_CANDIDATES and self.k >= 2.0:
-            count = max(count, int(round(within_two_sigma)))
+            count = max(count, int(round(seen.within_reach)))
         return level_for(max(count, 1))
 
 
@@ -53,8 +42,7 @@ class SilenceSearchPolicy:
         self.n, self.silent = int(n), int(silent)
 
     def predict(self, observation):
-        _, _, silent_tenths, _ = _decode(observation)
-        if round(silent_tenths * 10.0) >= self.silent:
+        if decode_observation(observation).silent_steps >= self.silent:
             return len(WAKE_COUNTS) - 1
         return level_for(self.n)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from gymnasium import spaces
 
@@ -10,7 +12,14 @@ from agents.rl.sensors_env import filter_reports
 from dgpt_gym.registry import make_tracker
 from dgpt_gym.validation import check_integer, check_real
 
-__all__ = ["DGPTrackSensorsV1Env", "WAKE_COUNTS", "OBSERVED_CANDIDATES", "TOP_SPEED"]
+__all__ = [
+    "DGPTrackSensorsV1Env",
+    "WAKE_COUNTS",
+    "OBSERVED_CANDIDATES",
+    "TOP_SPEED",
+    "SensorsObservation",
+    "decode_observation",
+]
 
 WAKE_COUNTS: tuple[int | None, ...] = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, None)
 """Action a wakes the ``WAKE_COUNTS[a]`` charged sensors nearest the tracker's prediction;
@@ -21,6 +30,39 @@ OBSERVED_CANDIDATES = 16
 
 TOP_SPEED = 25.0
 """m/s: the scenarios' top speed, the scale of the predicted velocity in the observation."""
+
+# the observation's other scales, shared by the environment and decode_observation
+_STD_LOG_SCALE = 6.0  # log1p(standard deviation, m) / 6
+_SILENT_SCALE = 10.0  # steps since a report / 10
+_COUNT_LOG_SCALE = 6.0  # log1p(measurements) / 6
+_REACH_COUNT_SCALE = 64.0  # charged sensors within range + 2 sigma / 64
+
+
+class SensorsObservation(NamedTuple):
+    """What the rules and the action tables read of a ``DGPTrackSensors-v1`` observation,
+    in physical units."""
+
+    distances: np.ndarray
+    """(OBSERVED_CANDIDATES,) the nearest charged sensors' distances to the prediction, in
+    sensing ranges (10 where there is no such sensor)."""
+    sigma: float
+    """The larger predictive standard deviation, m."""
+    silent_steps: int
+    """Steps since any woken sensor reported (the observation keeps at most 10)."""
+    within_reach: float
+    """Charged sensors within sensing range + 2 sigma of the prediction."""
+
+
+def decode_observation(observation) -> SensorsObservation:
+    """The inverse of the environment's scaling for the fields of :class:`SensorsObservation`."""
+    observation = np.asarray(observation, dtype=float)
+    tail = observation[3 * OBSERVED_CANDIDATES :]
+    return SensorsObservation(
+        distances=observation[0 : 3 * OBSERVED_CANDIDATES : 3],
+        sigma=float(np.max(np.expm1(_STD_LOG_SCALE * tail[0:2]))),
+        silent_steps=round(float(tail[5]) * _SILENT_SCALE),
+        within_reach=float(tail[8]) * _REACH_COUNT_SCALE,
+    )
 
 
 class DGPTrackSensorsV1Env(TrackerInsideEnv):
@@ -239,13 +281,13 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         per_candidate[: nearest.size, 2] = self._awake[nearest]
         reach = self.inner.sensing_range + 2.0 * float(np.max(self._predicted_std))
         tail = np.empty(9)
-        tail[0:2] = np.log1p(self._predicted_std) / 6.0
+        tail[0:2] = np.log1p(self._predicted_std) / _STD_LOG_SCALE
         tail[2:4] = self._velocity / TOP_SPEED
         tail[4] = 1.0 - self._step / self.inner.n_steps
-        tail[5] = min(self._silent / 10.0, 1.0)
-        tail[6] = np.log1p(self._last_count) / 6.0
+        tail[5] = min(self._silent / _SILENT_SCALE, 1.0)
+        tail[6] = np.log1p(self._last_count) / _COUNT_LOG_SCALE
         tail[7] = np.mean(self.battery_)
-        tail[8] = np.count_nonzero(distance <= reach) / 64.0
+        tail[8] = np.count_nonzero(distance <= reach) / _REACH_COUNT_SCALE
         vector = np.concatenate((per_candidate.ravel(), tail))
         # np.clip's numbers (NaN included), without its overhead
         return np.minimum(np.maximum(vector, -10.0), 10.0).astype(np.float32)

@@ -15,28 +15,20 @@ import math
 
 import numpy as np
 
-from agents.rl.features import FEATURE_NAMES
+from agents.rl.features import decode_features
 from agents.rl.tuning_envs import DEFAULT_WINDOWS
 from dgpt_gym.validation import check_choice, check_real
 
 __all__ = ["QuietTrackGatePolicy", "SurpriseWindowPolicy", "TUNING_RULES", "TUNING_RULE_GRIDS"]
-
-_FEATURE = {name: index for index, name in enumerate(FEATURE_NAMES)}
-
-
-def _surprise_m(observation, sensing_range: float) -> float:
-    """The last step's mean innovation in metres (the feature is scaled by the range)."""
-    return float(observation[_FEATURE["innovation"]]) * sensing_range
 
 
 def _quiet(observation, quiet_m: float, sensing_range: float) -> bool:
     """The tracker has experts, the last step had gated summaries (measurements that the
     hard gate did not all drop: the innovation is then above zero), and they lay within
     ``quiet_m`` of the predictions on average."""
-    has_model = observation[_FEATURE["n_experts"]] > 0
-    silent = observation[_FEATURE["silent_steps"]] > 0
-    surprise = _surprise_m(observation, sensing_range)
-    return bool(has_model and not silent and 0.0 < surprise < quiet_m)
+    seen = decode_features(observation)
+    surprise_m = seen.innovation * sensing_range
+    return bool(seen.n_experts > 0 and seen.silent_steps == 0 and 0.0 < surprise_m < quiet_m)
 
 
 class QuietTrackGatePolicy:

@@ -11,7 +11,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import dgpt_gym  # noqa: F401  (registers the environments)
 from agents.rl.evaluation import ModelPolicy, RandomPolicy, evaluate_policy_on_seeds
-from agents.rl.sensors_v1 import WAKE_COUNTS
+from agents.rl.sensors_v1 import WAKE_COUNTS, decode_observation
 
 ENV_ID = "DGPTrackSensors-v1"
 BOTH = ["DGPTrackSensors-v1", "DGPTrackSensors-v2"]
@@ -222,6 +222,11 @@ def test_the_observation_describes_the_prediction_and_the_sensors(env_id):
         expected[1:48:3] = info["battery"][nearest]
         expected[2:48:3] = info["woken"][nearest]
         np.testing.assert_allclose(observation, np.clip(expected, -10, 10), rtol=1e-6, atol=1e-6)
+        seen = decode_observation(observation)  # what the rules read, in physical units
+        np.testing.assert_allclose(seen.distances, distance[:16] / 50.0, rtol=1e-6)
+        assert seen.sigma == pytest.approx(std.max(), rel=1e-5)
+        assert seen.silent_steps == min(silent, 10)
+        assert seen.within_reach == np.sum(distance <= 50.0 + 2.0 * std.max())
 
 
 def test_the_error_term_is_capped():

@@ -83,24 +83,30 @@ def test_rule_arguments_are_validated(rule, setting, message):
         rule(**setting)
 
 
-def test_the_rules_read_the_innovation_in_metres_as_the_environment_writes_it():
+def test_the_rules_read_the_tracker_as_the_environment_writes_it():
     """The rules' decoding against the tracker itself: after each step the observation's
-    innovation, read by the rules, is the mean distance (m) of the gated summaries from
-    their predictions, and a step without summaries is never quiet."""
-    from agents.rl.tuning_rules import _quiet, _surprise_m
+    innovation, read in metres, is the mean distance of the gated summaries from their
+    predictions, the experts and silent steps are the tracker's, and a step without
+    summaries is never quiet."""
+    from agents.rl.features import decode_features
+    from agents.rl.tuning_rules import _quiet
 
     env = gym.make("DGPTrackGating-v0", scenario="S1", clutter_rate=5.0)
+    sensing_range = env.unwrapped.inner.sensing_range
     observation, _ = env.reset(seed=1000)
-    checked = 0
+    checked, silent = 0, 0
     for _ in range(60):
+        n_measurements = int(np.sum(env.unwrapped._pending["mask"]))  # the step's own
         observation, *_ = env.step(np.array([1.0], dtype=np.float32))
         tracker = env.unwrapped.tracker
         innovation = tracker.last_innovation_
         expected = float(np.mean(np.hypot(*innovation.T))) if innovation.size else 0.0
-        assert _surprise_m(observation, env.unwrapped.inner.sensing_range) == pytest.approx(
-            expected, rel=1e-5, abs=1e-4
-        )
+        seen = decode_features(observation)
+        assert seen.innovation * sensing_range == pytest.approx(expected, rel=1e-5, abs=1e-4)
+        assert seen.n_experts == tracker.n_experts_
+        silent = 0 if n_measurements else silent + 1
+        assert seen.silent_steps == silent
         if not innovation.size:
-            assert not _quiet(observation, 1e9, env.unwrapped.inner.sensing_range)
+            assert not _quiet(observation, 1e9, sensing_range)
         checked += innovation.size > 0
     assert checked > 10
