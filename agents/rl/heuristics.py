@@ -25,6 +25,11 @@ class UncertaintyRadiusPolicy:
     def __init__(self, k: float, sensing_range: float = 50.0) -> None:
         self.k, self.sensing_range = float(k), float(sensing_range)
 
+    @classmethod
+    def from_env(cls, env, **setting) -> UncertaintyRadiusPolicy:
+        """The rule for ``env``'s sensing range."""
+        return cls(**setting, sensing_range=env.unwrapped.inner.sensing_range)
+
     def predict(self, observation):
         seen = decode_observation(observation)
         radius = (self.sensing_range + self.k * seen.sigma) / self.sensing_range
@@ -40,6 +45,11 @@ class SilenceSearchPolicy:
 
     def __init__(self, n: int, silent: int) -> None:
         self.n, self.silent = int(n), int(silent)
+
+    @classmethod
+    def from_env(cls, env, **setting) -> SilenceSearchPolicy:
+        """The rule (it reads nothing of ``env``'s settings)."""
+        return cls(**setting)
 
     def predict(self, observation):
         if decode_observation(observation).silent_steps >= self.silent:

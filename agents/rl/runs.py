@@ -49,7 +49,8 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
     :func:`agents.rl.training.train_agent` wrote), ``"constant"`` (``setting`` the action),
     ``"random"`` (seeded with ``seed``), ``"clairvoyant"`` (the greedy one of
     :mod:`agents.rl.clairvoyant`; ``setting`` the action it keeps among ties, or None), or a key of ``rules`` (a policy class
-    called with the ``setting`` dict as keyword arguments)."""
+    whose ``from_env(env, **setting)`` makes the rule for ``env``'s settings, such as its
+    sensing range)."""
     if kind == "agent":
         model, config = load_agent(setting)
         return ModelPolicy(model, config["normalizer"])
@@ -62,7 +63,7 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
     if rules is None or kind not in rules:
         allowed = ["agent", "constant", "random", "clairvoyant", *(rules or {})]
         raise ValueError(f"kind must be one of {allowed}; got {kind!r}")
-    return rules[kind](**setting)
+    return rules[kind].from_env(env, **setting)
 
 
 def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: dict) -> None:

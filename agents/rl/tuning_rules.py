@@ -36,7 +36,8 @@ class QuietTrackGatePolicy:
     step had gated summaries and they lay within ``quiet_m`` metres of their predictions on
     average), else ``loose``: after a silent step, and after a step whose measurements the
     gate dropped entirely. Thresholds are Mahalanobis distances, mapped to the
-    action as the environment maps it back (its default range 1-30)."""
+    action as the environment maps it back (its range, 1-30 by default, which ``from_env``
+    takes from the environment)."""
 
     def __init__(
         self,
@@ -61,6 +62,17 @@ class QuietTrackGatePolicy:
         self.tight, self.loose = action(tight), action(loose)
         self.quiet_m, self.sensing_range = float(quiet_m), float(sensing_range)
 
+    @classmethod
+    def from_env(cls, env, **setting) -> QuietTrackGatePolicy:
+        """The rule for ``env``'s threshold range and sensing range."""
+        unwrapped = env.unwrapped
+        return cls(
+            **setting,
+            min_threshold=unwrapped.min_threshold,
+            max_threshold=unwrapped.max_threshold,
+            sensing_range=unwrapped.inner.sensing_range,
+        )
+
     def predict(self, observation):
         return self.tight if _quiet(observation, self.quiet_m, self.sensing_range) else self.loose
 
@@ -84,13 +96,22 @@ class SurpriseWindowPolicy:
         surprise_m = check_real("surprise_m", surprise_m, low=0.0, low_inclusive=False)
         self.surprise_m, self.sensing_range = float(surprise_m), float(sensing_range)
 
+    @classmethod
+    def from_env(cls, env, **setting) -> SurpriseWindowPolicy:
+        """The rule for ``env``'s windows and sensing range."""
+        unwrapped = env.unwrapped
+        return cls(
+            **setting, windows=unwrapped.windows, sensing_range=unwrapped.inner.sensing_range
+        )
+
     def predict(self, observation):
         quiet = _quiet(observation, self.surprise_m, self.sensing_range)
         return self.quiet if quiet else self.surprised
 
 
 TUNING_RULES = {"quiet-track gate": QuietTrackGatePolicy, "surprise window": SurpriseWindowPolicy}
-"""The rules by name, as :func:`agents.rl.runs.run_policies` takes them."""
+"""The rules by name, as :func:`agents.rl.runs.run_policies` takes them (each made for its
+environment by ``from_env``)."""
 
 TUNING_RULE_GRIDS = {
     "DGPTrackGating-v0": {

@@ -58,6 +58,26 @@ def test_the_surprise_window_follows_the_last_steps_innovation(situation, window
     assert env.windows[policy.predict(observation(**situation))] == window
 
 
+def test_the_rules_take_the_environments_settings():
+    """Made by ``make_policy`` as the evaluation scripts make them, the rules read the
+    innovation with the environment's sensing range and act in its windows and threshold
+    range."""
+    from agents.rl.runs import make_policy
+
+    gating = gym.make("DGPTrackGating-v0", sensing_range=80.0, max_threshold=20.0)
+    setting = {"tight": 2.34, "quiet_m": 2.0, "loose": 12.0}
+    rule = make_policy("quiet-track gate", setting, gating, 0, TUNING_RULES)
+    quiet = observation(innovation_m=1.9 * 50.0 / 80.0)  # 1.9 m at a range of 80 m
+    assert gating.unwrapped.threshold(rule.predict(quiet)) == pytest.approx(2.34, rel=1e-6)
+    surprised = observation(innovation_m=2.1 * 50.0 / 80.0)
+    assert gating.unwrapped.threshold(rule.predict(surprised)) == pytest.approx(12.0, rel=1e-6)
+    windows = gym.make("DGPTrackWindow-v0", windows=(2, 4, 8), sensing_range=80.0)
+    setting = {"quiet": 4, "surprised": 8, "surprise_m": 5.0}
+    rule = make_policy("surprise window", setting, windows, 0, TUNING_RULES)
+    assert windows.unwrapped.windows[rule.predict(observation(innovation_m=4.9 * 50 / 80))] == 4
+    assert windows.unwrapped.windows[rule.predict(observation(innovation_m=5.1 * 50 / 80))] == 8
+
+
 def test_every_grid_setting_makes_a_rule_that_acts_in_its_environment():
     for env_id, grids in TUNING_RULE_GRIDS.items():
         env = gym.make(env_id)
