@@ -264,7 +264,7 @@ def test_dqn_needs_a_discrete_action_space(tmp_path):
     "name, env_id", [("window", "DGPTrackWindow-v0"), ("gating", "DGPTrackGating-v0")]
 )
 def test_the_committed_tuning_agents_load_and_act(name, env_id):
-    """models/ holds the five window (200000 steps) and five gating (40000) agents docs/rl.md
+    """models/ holds the five window (1e6 steps) and five gating (40000) agents docs/rl.md
     quotes, each at most 1 MB; they load with their frozen normaliser, were trained on random paths in
     per-episode layouts, and act on raw observations of that environment."""
     from pathlib import Path
@@ -276,7 +276,7 @@ def test_the_committed_tuning_agents_load_and_act(name, env_id):
         assert sum(f.stat().st_size for f in folder.iterdir()) <= 1_000_000
         config = json.loads((folder / "config.json").read_text())
         assert config["env"] == env_id
-        assert config["timesteps"] == (200000 if name == "window" else 40000)
+        assert config["timesteps"] == (1_000_000 if name == "window" else 40000)
         assert config["env_kwargs"] == {
             "scenario": "S3",
             "clutter_rate": 5,
