@@ -91,8 +91,11 @@ def best_fixed_records(task) -> dict[str, list]:
 
 
 def cached_records(task_and_cache) -> dict[str, list]:
+    """:func:`best_fixed_records` of a task, kept in the cache folder under a key of the
+    packages' code, this script's own (which records them) and the task."""
     task, cache = task_and_cache
-    key = json.dumps([code_digest(), *task], sort_keys=True, default=str)
+    script = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+    key = json.dumps([code_digest(), script, *task], sort_keys=True, default=str)
     path = cache / f"records-{hashlib.sha256(key.encode()).hexdigest()[:20]}.json"
     return cached_json(path, lambda: best_fixed_records(task))
 

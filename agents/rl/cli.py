@@ -54,7 +54,7 @@ def add_evaluation_arguments(parser: argparse.ArgumentParser, cache: Path) -> No
         type=Path,
         default=cache,
         help="folder keeping each policy's episodes as they finish, so that a rerun (or an "
-        "interrupted run) reuses them; keyed by a hash of the package's code, the policy, "
+        "interrupted run) reuses them; keyed by a hash of the packages' code, the policy, "
         f"the environment and the seeds (default: {cache})",
     )
     parser.add_argument("--no-cache", action="store_true", help="run every episode afresh")

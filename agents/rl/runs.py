@@ -188,7 +188,8 @@ def run_policies(
     :func:`make_policy` takes them) on every seed, one list per policy in order; a process
     pool of ``workers`` (default: the CPU count; 1 runs here) takes one policy each. With a
     ``cache`` folder each policy's rows are kept there as they finish and read back by a
-    later call with the same version, policy, environment and seeds, so an interrupted run
+    later call with the same code (:func:`code_digest`), policy, environment and seeds, so
+    an interrupted run
     loses no finished policy."""
     seeds = [int(seed) for seed in seeds]
     if workers is not None and workers < 1:

@@ -277,6 +277,9 @@ def test_the_committed_tuning_agents_load_and_act(name, env_id):
         config = json.loads((folder / "config.json").read_text())
         assert config["env"] == env_id
         assert config["timesteps"] == (1_000_000 if name == "window" else 40000)
+        n_envs = 32 if name == "window" else 4  # models/README.md's commands
+        seed = int(folder.name.rsplit("seed", 1)[1])
+        assert (config["n_envs"], config["training_env_seed"]) == (n_envs, 10000 + n_envs * seed)
         assert config["env_kwargs"] == {
             "scenario": "S3",
             "clutter_rate": 5,
