@@ -62,11 +62,6 @@ class AdvantagePolicy:
     def __init__(self, tree, actions: list, fallback: int) -> None:
         self.tree, self.actions, self.fallback = tree, actions, fallback
 
-    @classmethod
-    def from_env(cls, env, **setting) -> AdvantagePolicy:
-        """The policy (its actions are the environment's fixed settings already)."""
-        return cls(**setting)
-
     def predict(self, observation):
         advantage = self.tree.predict(np.asarray(observation, dtype=float)[None])[0]
         best = int(np.argmax(advantage))
@@ -75,7 +70,7 @@ class AdvantagePolicy:
 
 TREE_POLICY = {"tree": AdvantagePolicy}
 """:func:`agents.rl.runs.run_policies`' rule of kind ``"tree"``: an :class:`AdvantagePolicy`
-from its keyword arguments (``from_env``, as every rule)."""
+from its keyword arguments."""
 
 
 def best_fixed_records(task) -> dict[str, list]:

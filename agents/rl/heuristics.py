@@ -46,11 +46,6 @@ class SilenceSearchPolicy:
     def __init__(self, n: int, silent: int) -> None:
         self.n, self.silent = int(n), int(silent)
 
-    @classmethod
-    def from_env(cls, env, **setting) -> SilenceSearchPolicy:
-        """The rule (it reads nothing of ``env``'s settings)."""
-        return cls(**setting)
-
     def predict(self, observation):
         if decode_observation(observation).silent_steps >= self.silent:
             return len(WAKE_COUNTS) - 1

@@ -49,8 +49,9 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
     :func:`agents.rl.training.train_agent` wrote), ``"constant"`` (``setting`` the action),
     ``"random"`` (seeded with ``seed``), ``"clairvoyant"`` (the greedy one of
     :mod:`agents.rl.clairvoyant`; ``setting`` the action it keeps among ties, or None), or a key of ``rules`` (a policy class
-    whose ``from_env(env, **setting)`` makes the rule for ``env``'s settings, such as its
-    sensing range)."""
+    called with the ``setting`` dict as keyword arguments, through its
+    ``from_env(env, **setting)`` where it has one, which takes ``env``'s settings too, such
+    as its sensing range)."""
     if kind == "agent":
         model, config = load_agent(setting)
         return ModelPolicy(model, config["normalizer"])
@@ -63,7 +64,8 @@ def make_policy(kind: str, setting, env: gym.Env, seed: int, rules: dict | None 
     if rules is None or kind not in rules:
         allowed = ["agent", "constant", "random", "clairvoyant", *(rules or {})]
         raise ValueError(f"kind must be one of {allowed}; got {kind!r}")
-    return rules[kind].from_env(env, **setting)
+    rule = rules[kind]
+    return rule.from_env(env, **setting) if hasattr(rule, "from_env") else rule(**setting)
 
 
 def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: dict) -> None:
@@ -81,8 +83,8 @@ def check_agent_folders(folders: Iterable[str | Path], env_id: str, env_kwargs: 
             )
         seen[folder.name] = folder
     for folder in folders:
-        config_path = Path(folder) / "config.json"
-        if not config_path.is_file() or not (Path(folder) / "model.zip").is_file():
+        config_path = folder / "config.json"
+        if not config_path.is_file() or not (folder / "model.zip").is_file():
             raise ValueError(
                 f"{folder} is not a trained agent's folder (it needs model.zip and config.json, "
                 "as scripts/train_rl.py writes them)"

@@ -111,7 +111,7 @@ class SurpriseWindowPolicy:
 
 TUNING_RULES = {"quiet-track gate": QuietTrackGatePolicy, "surprise window": SurpriseWindowPolicy}
 """The rules by name, as :func:`agents.rl.runs.run_policies` takes them (each made for its
-environment by ``from_env``)."""
+environment by its ``from_env``)."""
 
 TUNING_RULE_GRIDS = {
     "DGPTrackGating-v0": {

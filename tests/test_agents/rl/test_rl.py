@@ -297,6 +297,23 @@ def test_the_committed_tuning_agents_load_and_act(name, env_id):
         observation, *_ = env.step(action)
 
 
+def test_a_rule_without_from_env_is_called_with_its_setting():
+    """Rules written before ``from_env`` existed (a class called with the setting) still
+    work in ``make_policy``."""
+    from agents.rl.runs import make_policy
+
+    class Always:
+        def __init__(self, action):
+            self.action = action
+
+        def predict(self, observation):
+            return self.action
+
+    env = gym.make("DGPTrackWindow-v0")
+    policy = make_policy("always", {"action": 2}, env, 0, {"always": Always})
+    assert policy.predict(None) == 2
+
+
 def test_run_policies_keeps_each_policys_episodes_and_reads_them_back(tmp_path, monkeypatch):
     """With a cache folder, a policy's rows are written once and a second call with the same
     policy, environment and seeds reads them back without running an episode; other seeds
