@@ -90,10 +90,19 @@ def _log_products(densities, groups, n_groups, detection_rate, clutter_density) 
     return log_product
 
 
-def near_densities(positions: np.ndarray, points: np.ndarray, noise_var: float):
+def near_densities(
+    positions: np.ndarray,
+    points: np.ndarray,
+    noise_var: float,
+    position_tree: spatial.cKDTree | None = None,
+):
     """The (position, point) pairs closer than 6 sigma (beyond, N(z; x, sigma^2 I) is below
-    2e-8 of its peak): ``(position index (p,), point index (p,), N(z; x, sigma^2 I) (p,))``."""
-    near = spatial.cKDTree(positions).sparse_distance_matrix(
+    2e-8 of its peak): ``(position index (p,), point index (p,), N(z; x, sigma^2 I) (p,))``.
+    ``position_tree``: a k-d tree of ``positions`` already built (a caller that queries them
+    twice builds it once; the pairs are the same)."""
+    if position_tree is None:
+        position_tree = spatial.cKDTree(positions)
+    near = position_tree.sparse_distance_matrix(
         spatial.cKDTree(points), 6.0 * np.sqrt(noise_var), output_type="ndarray"
     )
     density = np.exp(-0.5 * near["v"] ** 2 / noise_var) / (2.0 * np.pi * noise_var)
@@ -133,7 +142,8 @@ def scan_log_likelihood_ratios(
     sensor_index = np.arange(sensor_positions.shape[0])
     if awake is not None:
         sensor_index = sensor_index[np.asarray(awake, dtype=bool)]
-    covering = spatial.cKDTree(positions).sparse_distance_matrix(
+    position_tree = spatial.cKDTree(positions)
+    covering = position_tree.sparse_distance_matrix(
         spatial.cKDTree(sensor_positions[sensor_index]), sensing_range, output_type="ndarray"
     )
     pair_position = covering["i"].astype(np.int64)
@@ -143,7 +153,9 @@ def scan_log_likelihood_ratios(
     n_sensors = sensor_positions.shape[0]
     pair_log_ratio = np.full(pair_position.size, -np.inf)  # no point near: ruled out
     if points.shape[0]:
-        near_position, near_point, densities = near_densities(positions, points, noise_var)
+        near_position, near_point, densities = near_densities(
+            positions, points, noise_var, position_tree
+        )
         # keyed by (position, sensor); the keys of sensors that do not cover the position
         # (or sleep) are never looked up below
         near_key = near_position * n_sensors + sensors[near_point]
