@@ -550,8 +550,12 @@ def test_train_rl_reports_its_speed_by_hand():
     assert training_speed(65536, 40.0) == expected
 
 
-def test_train_rl_keeps_each_seeds_agent_in_its_own_folder():
+def test_train_rl_keeps_each_tasks_and_seeds_agent_in_its_own_folder():
     from agents.rl.cli import default_output_folder
+    from agents.rl.training import RL_ENV_IDS
 
-    folders = {default_output_folder("DGPTrackWindow-v0", "ppo", seed) for seed in range(3)}
-    assert Path("results/rl/DGPTrackWindow-ppo-seed1") in folders and len(folders) == 3
+    folders = {
+        default_output_folder(env_id, "ppo", seed) for env_id in RL_ENV_IDS for seed in range(3)
+    }
+    assert len(folders) == 3 * len(RL_ENV_IDS)  # the sensor task's v0, v1, v2 included
+    assert Path("results/rl/DGPTrackSensors-v2-ppo-seed1") in folders

@@ -71,9 +71,10 @@ def training_speed(timesteps: int, seconds: float) -> str:
 
 
 def default_output_folder(env_id: str, algo: str, seed: int) -> Path:
-    """Where ``main`` saves an agent without ``--out``: one folder per task, algorithm and
-    seed, so that a training with another seed does not overwrite a finished one."""
-    return Path("results") / "rl" / f"{env_id.split('-')[0]}-{algo}-seed{seed}"
+    """Where ``main`` saves an agent without ``--out``: one folder per environment id
+    (version included: the sensor task's v0, v1 and v2 are different tasks), algorithm and
+    seed, so that another training does not overwrite a finished one."""
+    return Path("results") / "rl" / f"{env_id}-{algo}-seed{seed}"
 
 
 def parse_kwargs(items: list[str]) -> dict:
@@ -127,8 +128,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--out",
         type=Path,
         default=None,
-        help="output folder (default: results/rl/<env>-<algo>-seed<seed>, so that trainings "
-        "with other seeds keep their own)",
+        help="output folder (default: results/rl/<env id>-<algo>-seed<seed>, so that "
+        "trainings of other tasks or seeds keep their own)",
     )
     parser.add_argument(
         "--env-kwargs",
