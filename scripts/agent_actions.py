@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import collections
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -63,11 +64,12 @@ def sensor_situation(observation: np.ndarray) -> str:
     )
 
 
-def tuning_situation(observation: np.ndarray) -> str:
+def tuning_situation(observation: np.ndarray, sensing_range: float) -> str:
+    """The situation of a tuning task's step; the innovation is observed in sensing ranges."""
     seen = decode_features(observation)
     if seen.silent_steps >= 1:
         return TUNING_SITUATIONS[3]
-    if seen.innovation > 0.2:  # 10 m at the default sensing range of 50 m
+    if seen.innovation * sensing_range > 10.0:
         return TUNING_SITUATIONS[2]
     return TUNING_SITUATIONS[0] if seen.n_experts <= 2 else TUNING_SITUATIONS[1]
 
@@ -76,7 +78,10 @@ def tally(env: gym.Env, policy, seeds: range, counts: dict) -> tuple[str, ...]:
     """Add to ``counts`` (situation -> Counter of knob values) what ``policy`` sets on every
     step of ``seeds``; returns the environment's situations in table order."""
     sensors = isinstance(env.unwrapped, DGPTrackSensorsV1Env)
-    classify = sensor_situation if sensors else tuning_situation
+    sensing_range = env.unwrapped.inner.sensing_range
+    classify = (
+        sensor_situation if sensors else partial(tuning_situation, sensing_range=sensing_range)
+    )
     for seed in seeds:
         observation, _ = env.reset(seed=seed)
         done = False

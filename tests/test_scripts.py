@@ -559,3 +559,33 @@ def test_train_rl_keeps_each_tasks_and_seeds_agent_in_its_own_folder():
     }
     assert len(folders) == 3 * len(RL_ENV_IDS)  # the sensor task's v0, v1, v2 included
     assert Path("results/rl/DGPTrackSensors-v2-ppo-seed1") in folders
+
+
+def test_agent_actions_classifies_tuning_steps_in_metres():
+    """scripts/agent_actions.py's situations of a tuning task: a silent step first, then an
+    innovation above 10 m (observed in sensing ranges, so the range converts it), then the
+    number of experts."""
+    import importlib.util
+
+    from agents.rl.features import FEATURE_NAMES
+
+    spec = importlib.util.spec_from_file_location(
+        "agent_actions", ROOT / "scripts" / "agent_actions.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    index = {name: i for i, name in enumerate(FEATURE_NAMES)}
+
+    def situation(experts, innovation_m, silent, sensing_range):
+        vector = np.zeros(len(FEATURE_NAMES), dtype=np.float32)
+        vector[index["n_experts"]] = experts / 10
+        vector[index["innovation"]] = innovation_m / sensing_range
+        vector[index["silent_steps"]] = silent / 10
+        return module.tuning_situation(vector, sensing_range)
+
+    names = module.TUNING_SITUATIONS
+    for sensing_range in (50.0, 80.0):
+        assert situation(3, 9.0, 0, sensing_range) == names[1]
+        assert situation(2, 9.0, 0, sensing_range) == names[0]
+        assert situation(3, 11.0, 0, sensing_range) == names[2]
+        assert situation(3, 11.0, 1, sensing_range) == names[3]
