@@ -177,11 +177,13 @@ def gaussian_sums(
     measurements, groups, skipped = measurements[order], groups[order], skipped[:, order]
     # last[h, j]: z_j is the last point of its sensor that prior h does not skip, where the
     # per-sensor model drops h's components with no target point of that sensor
+    # (both used by the per-sensor model only)
     last = np.zeros(skipped.shape, dtype=bool)
-    for prior, row in enumerate(skipped):
-        kept = np.flatnonzero(~row)
-        if kept.size:
-            last[prior, kept[np.r_[groups[kept][1:] != groups[kept][:-1], True]]] = True
+    if sensors is not None:
+        for prior, row in enumerate(skipped):
+            kept = np.flatnonzero(~row)
+            if kept.size:
+                last[prior, kept[np.r_[groups[kept][1:] != groups[kept][:-1], True]]] = True
     has_target = np.zeros(count, dtype=bool)  # per component: a target point of this sensor
     any_skipped = skipped.any(axis=0)
     for index, z in enumerate(measurements):
@@ -193,17 +195,16 @@ def gaussian_sums(
         split_means, split_vars = means[split], variances[split]
         predictive_var = split_vars + noise_var
         residual = z - split_means
-        log_target = log_rate - 0.5 * np.sum(
-            residual**2 / predictive_var + np.log(2.0 * np.pi * predictive_var), axis=1
-        )
+        terms = residual**2 / predictive_var + np.log(2.0 * np.pi * predictive_var)
+        log_target = log_rate - 0.5 * (terms[:, 0] + terms[:, 1])
         gain = split_vars / predictive_var
         means = np.concatenate([means, split_means + gain * residual])
         variances = np.concatenate([variances, (1.0 - gain) * split_vars])
         log_weights = np.concatenate([log_weights + clutter, log_weights[split] + log_target])
         owner = np.concatenate([owner, owner[split]])
-        has_target = np.concatenate([has_target, np.ones(residual.shape[0], dtype=bool)])
         valid = pending = None  # eq. (42): every component valid, none pending
         if sensors is not None:
+            has_target = np.concatenate([has_target, np.ones(residual.shape[0], dtype=bool)])
             # the model has no "all of this sensor's points are clutter"
             ends = last[owner, index]
             valid = has_target | ~ends
@@ -247,7 +248,9 @@ def gaussian_sums(
         dropped = np.bincount(owner, np.where(keep, 0.0, weights), minlength=count)
         pruned = pruned + (1.0 - pruned) * dropped / np.where(total > 0, total, 1.0)
         means, variances, log_weights = means[keep], variances[keep], log_weights[keep]
-        owner, has_target = owner[keep], has_target[keep]
+        owner = owner[keep]
+        if sensors is not None:
+            has_target = has_target[keep]
     if region is not None:
         log_mass, means, variances = region_truncation(means, variances, *region)
         reached = np.bincount(owner, np.isfinite(log_mass), minlength=count) > 0

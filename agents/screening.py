@@ -36,6 +36,8 @@ is what makes a clutter point that other sensors fail to confirm recognisable.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import spatial, stats
 
@@ -55,6 +57,7 @@ __all__ = [
     "initiation_scores",
     "disc_probability",
     "near_densities",
+    "pair_indices",
     "draws_near_candidates",
 ]
 
@@ -85,9 +88,10 @@ def scan_likelihood_ratio(
 
 def _log_products(densities, groups, n_groups, detection_rate, clutter_density) -> np.ndarray:
     """l = sum_j log(1 + lambda_T N_j / c) per scan (n_groups,)."""
-    log_product = np.zeros(n_groups)
-    np.add.at(log_product, groups, np.log1p(detection_rate * densities / clutter_density))
-    return log_product
+    # bincount sums each group in the order of the measurements, as np.add.at does
+    return np.bincount(
+        groups, weights=np.log1p(detection_rate * densities / clutter_density), minlength=n_groups
+    )
 
 
 def near_densities(
@@ -144,38 +148,94 @@ def scan_log_likelihood_ratios(
         sensor_index = sensor_index[np.asarray(awake, dtype=bool)]
     position_tree = spatial.cKDTree(positions)
     covering = position_tree.sparse_distance_matrix(
-        spatial.cKDTree(sensor_positions[sensor_index]), sensing_range, output_type="ndarray"
+        _tree_of(sensor_positions[sensor_index]), sensing_range, output_type="ndarray"
     )
     pair_position = covering["i"].astype(np.int64)
     pair_sensor = sensor_index[covering["j"].astype(np.int64)]
     if not pair_position.size:
         return np.zeros(n), pair_position, pair_sensor
-    n_sensors = sensor_positions.shape[0]
-    pair_log_ratio = np.full(pair_position.size, -np.inf)  # no point near: ruled out
     if points.shape[0]:
         near_position, near_point, densities = near_densities(
             positions, points, noise_var, position_tree
         )
-        # keyed by (position, sensor); the keys of sensors that do not cover the position
-        # (or sleep) are never looked up below
-        near_key = near_position * n_sensors + sensors[near_point]
-        if near_key.size:
-            order = np.argsort(near_key, kind="stable")
-            near_key, densities = near_key[order], densities[order]
-            first = np.r_[True, near_key[1:] != near_key[:-1]]
-            keys = near_key[first]
-            log_ratio = scan_log_likelihood_ratio(
-                densities, np.cumsum(first) - 1, keys.size, detection_rate, clutter_density
-            )
-            pair_key = pair_position * n_sensors + pair_sensor
-            at = np.minimum(np.searchsorted(keys, pair_key), keys.size - 1)
-            match = keys[at] == pair_key
-            pair_log_ratio[match] = log_ratio[at[match]]
+        # a point counts for the pair of its position and its sensor; points of sensors
+        # that do not cover the position (or sleep) belong to no pair
+        at = pair_indices(
+            pair_position,
+            pair_sensor,
+            near_position,
+            sensors[near_point],
+            n,
+            sensor_positions.shape[0],
+        )
+        counted = at >= 0
+        densities, at = densities[counted], at[counted]
+    else:
+        densities, at = np.empty(0), np.empty(0, dtype=np.int64)
+    # a pair without a point near its position gets l = 0, log LR = -inf: ruled out
+    pair_log_ratio = scan_log_likelihood_ratio(
+        densities, at, pair_position.size, detection_rate, clutter_density
+    )
     return (
         np.bincount(pair_position, weights=pair_log_ratio, minlength=n),
         pair_position,
         pair_sensor,
     )
+
+
+DENSE_PAIR_TABLE = 1 << 20
+"""Largest (positions x covering sensors) table :func:`pair_indices` fills; beyond, it
+sorts the pairs instead (same answer, no large allocation)."""
+
+
+def pair_indices(
+    pair_position: np.ndarray,
+    pair_sensor: np.ndarray,
+    query_position: np.ndarray,
+    query_sensor: np.ndarray,
+    n_positions: int,
+    n_sensors: int,
+    max_table_cells: int = DENSE_PAIR_TABLE,
+) -> np.ndarray:
+    """For each query (position, sensor) (m,) the index of the same pair among the distinct
+    pairs ``(pair_position, pair_sensor)`` (p,), or -1 where it is not one of them. Position
+    indices are below ``n_positions``, sensor indices below ``n_sensors``.
+
+    A table over the positions and the sensors that occur in a pair when it has at most
+    ``max_table_cells`` cells (a step's draws around a prediction meet a few dozen
+    sensors); otherwise a binary search among the sorted pair keys."""
+    if not pair_position.size:
+        return np.full(query_position.size, -1, dtype=np.int64)
+    occurs = np.zeros(n_sensors, dtype=bool)
+    occurs[pair_sensor] = True
+    column = np.cumsum(occurs) - 1
+    width = int(column[-1]) + 1
+    index = np.full(query_position.size, -1, dtype=np.int64)
+    asked = occurs[query_sensor]
+    query_key = query_position[asked] * width + column[query_sensor[asked]]
+    pair_key = pair_position * width + column[pair_sensor]
+    if n_positions * width <= max_table_cells:
+        table = np.full(n_positions * width, -1, dtype=np.int64)
+        table[pair_key] = np.arange(pair_key.size)
+        index[asked] = table[query_key]
+        return index
+    order = np.argsort(pair_key)
+    sorted_key = pair_key[order]
+    at = np.minimum(np.searchsorted(sorted_key, query_key), sorted_key.size - 1)
+    index[asked] = np.where(sorted_key[at] == query_key, order[at], -1)
+    return index
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_of_bytes(data: bytes) -> spatial.cKDTree:
+    return spatial.cKDTree(np.frombuffer(data).reshape(-1, 2))
+
+
+def _tree_of(points: np.ndarray) -> spatial.cKDTree:
+    """The k-d tree of (m, 2) ``points``, kept for the next call with equal points: the
+    sensors are the same at every step of an episode, and a tree built from equal points is
+    the same tree (the same pairs in the same order)."""
+    return _tree_of_bytes(np.ascontiguousarray(points, dtype=float).tobytes())
 
 
 def area_log_likelihood_ratios(

@@ -116,6 +116,15 @@ def test_bench_prints_its_figures():
         assert step and float(step.group(1)) > 0
 
 
+def test_bench_clutter_all_prints_a_median_per_cell():
+    from dgpt_gym.benchmark.speed import bench_clutter_all
+
+    rows = bench_clutter_all(1, ("dgpt-rbcm",), ("S1",))
+    assert rows[0] == "| tracker | S1 fixed | S1 random |"
+    cells = re.fullmatch(r"\| `dgpt-rbcm` \| ([\d.]+) \| ([\d.]+) \|", rows[2])
+    assert cells and all(float(value) > 0 for value in cells.groups()), rows
+
+
 def test_train_rl_trains_saves_and_compares(tmp_path):
     result = run_script(
         "train_rl.py",

@@ -14,6 +14,10 @@
 - sklearn: full-GP log marginal likelihood + gradient versus scikit-learn's
   ``GaussianProcessRegressor.log_marginal_likelihood(theta, eval_gradient=True)`` on the same
   data and kernel, N = 1000, 2000, 4000. Goal: ratio <= 1.
+- clutter-all: median step (ms) of the GP trackers (``dgpt-rbcm``, ``gp``, ``dgpt-gpoe``,
+  ``hybrid``) with clutter at every sensor (``clutter_sensors="all"``, clutter rate 1), one
+  episode at a time, in each scenario on its reference path and on random paths. Goal
+  <= 3 ms in every cell (issue 12).
 - lockstep: seconds per episode of the GP trackers run one episode at a time
   (``run_episode``) and in a lockstep block (``run_episodes``, the sweep's way), on the same
   seeds, checking that the numbers are identical; the ratio is the sweep's speed-up.
@@ -50,6 +54,7 @@ SECTIONS = [
     "cpf-hybrid",
     "standard",
     "ncv-step",
+    "clutter-all",
     "lockstep",
     "vector-env",
     "sklearn",
@@ -161,6 +166,43 @@ def bench_ncv_step(episodes: int) -> dict:
         "dgpt-rbcm-trend step, window 3, median (ms)": trend,
         "dgpt-rbcm / dgpt-rbcm-trend": ncv / trend,
     }
+
+
+CLUTTER_ALL_TRACKERS = ("dgpt-rbcm", "gp", "dgpt-gpoe", "hybrid")
+
+
+def bench_clutter_all(
+    episodes: int,
+    trackers: tuple[str, ...] = CLUTTER_ALL_TRACKERS,
+    scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4"),
+) -> list[str]:
+    """Markdown rows: the median step (ms) of each of ``trackers`` over ``episodes``
+    episodes (seeds 0, 1, ...) per cell, each of ``scenarios`` on its reference path and on
+    random paths, clutter rate 1 at every sensor, one episode at a time."""
+    cells = [(s, path) for s in scenarios for path in ("fixed", "random")]
+    rows = [
+        "| tracker | " + " | ".join(f"{s} {path}" for s, path in cells) + " |",
+        "|---" * (len(cells) + 1) + "|",
+    ]
+    for tracker_id in trackers:
+        medians = []
+        for scenario, path in cells:
+            env = gym.make(
+                "DGPTrack-v0",
+                scenario=scenario,
+                trajectory=path,
+                clutter_rate=1.0,
+                clutter_sensors="all",
+            )
+            times = np.concatenate(
+                [
+                    run_episode(env, make_tracker(tracker_id), seed).step_time
+                    for seed in range(episodes)
+                ]
+            )
+            medians.append(1e3 * float(np.median(times)))
+        rows.append(f"| `{tracker_id}` | " + " | ".join(f"{m:.2f}" for m in medians) + " |")
+    return rows
 
 
 def bench_lockstep(episodes: int) -> dict:
@@ -313,6 +355,12 @@ def main(argv: list[str] | None = None) -> int:
         "--episodes", type=int, default=10, help="episodes of the DGPT step benchmark"
     )
     parser.add_argument(
+        "--clutter-all-episodes",
+        type=int,
+        default=3,
+        help="episodes per cell of the clutter-all section",
+    )
+    parser.add_argument(
         "--vector-steps", type=int, default=300, help="vector steps of the vector-env section"
     )
     parser.add_argument(
@@ -346,6 +394,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         for key, value in bench_ncv_step(args.episodes).items():
             print(f"{key}: {value:.3f}")
+    if "clutter-all" in args.only:
+        print(
+            f"\n## median step (ms) with clutter at every sensor, clutter rate 1, goal <= 3 "
+            f"({args.clutter_all_episodes} episodes per cell, one at a time)"
+        )
+        print("\n".join(bench_clutter_all(args.clutter_all_episodes)))
     if "lockstep" in args.only:
         blocks = args.episodes * 5
         print(

@@ -22,6 +22,7 @@ from agents.screening import (
     disc_probability,
     initiation_scores,
     joint_sensing_probability,
+    pair_indices,
     scan_likelihood_ratio,
     scan_log_likelihood_ratio,
     scan_log_likelihood_ratios,
@@ -207,6 +208,38 @@ def test_scan_log_likelihood_ratios_are_the_product_over_the_covering_awake_sens
         else:  # left out: that sensor's own ratio is at most a few 1e-5
             assert got == 0.0
             assert max(f for f, n in zip(factors, near) if not n) < 2e-4
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n_positions=st.integers(1, 12),
+    n_sensors=st.integers(1, 9),
+    seed=st.integers(0, 2**32 - 1),
+    max_table_cells=st.sampled_from([0, 1 << 20]),
+)
+def test_pair_indices_finds_each_query_among_the_pairs(
+    n_positions, n_sensors, seed, max_table_cells
+):
+    """Against a dictionary of the pairs: each query (position, sensor) gets the index of
+    the same pair, or -1 when it is not a pair, with the table (a limit of 2^20 cells) and
+    with the sorted search (a limit of 0)."""
+    rng = np.random.default_rng(seed)
+    every = np.array([(p, s) for p in range(n_positions) for s in range(n_sensors)])
+    pairs = every[rng.random(len(every)) < 0.4]
+    pairs = pairs[rng.permutation(len(pairs))]
+    queries = every[rng.integers(0, len(every), 3 * len(every))]
+    index = pair_indices(
+        pairs[:, 0],
+        pairs[:, 1],
+        queries[:, 0],
+        queries[:, 1],
+        n_positions,
+        n_sensors,
+        max_table_cells,
+    )
+    where = {(int(p), int(s)): k for k, (p, s) in enumerate(pairs)}
+    expected = [where.get((int(p), int(s)), -1) for p, s in queries]
+    np.testing.assert_array_equal(index, expected)
 
 
 def test_without_measurements_the_scan_likelihood_is_the_silence():
