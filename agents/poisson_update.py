@@ -176,8 +176,8 @@ def gaussian_sums(
     order = np.argsort(groups, kind="stable")
     measurements, groups, skipped = measurements[order], groups[order], skipped[:, order]
     # last[h, j]: z_j is the last point of its sensor that prior h does not skip, where the
-    # per-sensor model drops h's components with no target point of that sensor
-    # (both used by the per-sensor model only)
+    # per-sensor model drops h's components with no target point of that sensor; it and
+    # has_target serve that model only (eq. (42) without sensors needs neither)
     last = np.zeros(skipped.shape, dtype=bool)
     if sensors is not None:
         for prior, row in enumerate(skipped):
