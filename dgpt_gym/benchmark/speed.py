@@ -117,9 +117,16 @@ def bench_dgpt_step(episodes: int) -> dict:
     return results
 
 
-def median_step_ms(tracker_id: str, episodes: int, scenario: str = "S3", **kwargs) -> float:
-    """Median ``update`` time of a registered tracker over episodes (clutter rate 5)."""
-    env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=5.0)
+def median_step_ms(
+    tracker_id: str,
+    episodes: int,
+    scenario: str = "S3",
+    env_kwargs: dict | None = None,
+    **kwargs,
+) -> float:
+    """Median ``update`` time of a registered tracker (made with ``kwargs``) over episodes
+    (seeds 0, 1, ...) of ``scenario`` at clutter rate 5, or with ``env_kwargs`` instead."""
+    env = gym.make("DGPTrack-v0", scenario=scenario, **(env_kwargs or {"clutter_rate": 5.0}))
     times = []
     for seed in range(episodes):
         times.extend(run_episode(env, make_tracker(tracker_id, **kwargs), seed).step_time)
@@ -185,22 +192,15 @@ def bench_clutter_all(
         "|---" * (len(cells) + 1) + "|",
     ]
     for tracker_id in trackers:
-        medians = []
-        for scenario, path in cells:
-            env = gym.make(
-                "DGPTrack-v0",
-                scenario=scenario,
-                trajectory=path,
-                clutter_rate=1.0,
-                clutter_sensors="all",
+        medians = [
+            median_step_ms(
+                tracker_id,
+                episodes,
+                scenario,
+                {"trajectory": path, "clutter_rate": 1.0, "clutter_sensors": "all"},
             )
-            times = np.concatenate(
-                [
-                    run_episode(env, make_tracker(tracker_id), seed).step_time
-                    for seed in range(episodes)
-                ]
-            )
-            medians.append(1e3 * float(np.median(times)))
+            for scenario, path in cells
+        ]
         rows.append(f"| `{tracker_id}` | " + " | ".join(f"{m:.2f}" for m in medians) + " |")
     return rows
 
