@@ -150,6 +150,7 @@ def train_agent(
     (:func:`agents.rl.process_blocks.process_blocks_vec_env`; 1 steps them in this process).
     The environments' numbers, and so the trained model, do not depend on it."""
     import torch
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     check_choice("env", env_id, RL_ENV_IDS)
@@ -185,6 +186,10 @@ def train_agent(
         model = algorithm(
             "MlpPolicy", venv, seed=seed, verbose=0, tensorboard_log=tensorboard, **algo_kwargs
         )
+        if tensorboard is None:
+            # without a folder Stable-Baselines3's own logger makes an empty one under the
+            # temporary directory on every run; this logger writes nowhere
+            model.set_logger(Logger(folder=None, output_formats=[]))
         # SB3 checks some values (n_steps, batch_size, schedules) only when it starts
         model.learn(total_timesteps=timesteps, callback=_progress_callback(timesteps, progress))
     except (AssertionError, TypeError, ValueError, RuntimeError) as error:

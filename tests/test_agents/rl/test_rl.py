@@ -3,6 +3,7 @@ filtering, a short PPO run against a random policy, and saving and loading a mod
 
 import json
 import shutil
+import tempfile
 
 import gymnasium as gym
 import numpy as np
@@ -226,18 +227,23 @@ def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds(short_ppo):
     assert np.mean(trained) >= np.mean(best) - 3 * np.std(best, ddof=1) / np.sqrt(len(best))
 
 
-def test_saved_model_loads_and_reproduces_its_actions(tmp_path):
+def test_saved_model_loads_and_reproduces_its_actions(tmp_path, monkeypatch):
+    temporary = tmp_path / "temporary"
+    temporary.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temporary))
     agent = train_agent(
         "DGPTrackSensors-v0",
         "a2c",
         timesteps=200,
         seed=1,
         n_envs=1,
-        out=tmp_path,
+        out=tmp_path / "agent",
         env_kwargs={"n_candidates": 4, "max_episode_steps": 20},
         progress=False,
     )
-    model, config = load_agent(tmp_path)
+    # Stable-Baselines3's default logger would have made an empty folder there
+    assert not list(temporary.glob("SB3-*"))
+    model, config = load_agent(tmp_path / "agent")
     assert config["algo"] == "a2c" and config["env"] == "DGPTrackSensors-v0"
     # the observation statistics of training are saved and frozen for evaluation
     saved = config["normalizer"]
