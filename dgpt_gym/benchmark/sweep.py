@@ -36,9 +36,10 @@ from dgpt_gym.benchmark.episodes import (
 from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
+from dgpt_gym.env import TRAJECTORY_MODES
 from dgpt_gym.registry import TrackerSpec, tracker_spec
 from dgpt_gym.scenarios import get_scenario
-from dgpt_gym.validation import check_integer, check_real
+from dgpt_gym.validation import check_choice, check_integer, check_real
 
 __all__ = [
     "Grid",
@@ -95,7 +96,10 @@ class Grid:
     """Every tracker on every (scenario, noise_std, clutter_rate) cell, seeds
     ``first_seed .. first_seed + runs - 1`` (the same seeds give every tracker the same
     measurements). With ``tuned_windows`` the GP trackers use the window tuned for the
-    scenario (:mod:`dgpt_gym.benchmark.tuning`)."""
+    scenario (:mod:`dgpt_gym.benchmark.tuning`). ``trajectory``: the environment's path
+    mode (:data:`dgpt_gym.env.TRAJECTORY_MODES`); ``"fixed"``, the paper's reference
+    paths, leaves it out of the runs' environment arguments, so their keys in the store are
+    those of the grids without the field."""
 
     trackers: tuple[str, ...]
     scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4")
@@ -104,6 +108,7 @@ class Grid:
     runs: int = 10
     first_seed: int = 0
     tuned_windows: bool = True
+    trajectory: str = "fixed"
 
     def __post_init__(self) -> None:
         for name in ("trackers", "scenarios", "noise_levels", "clutter_rates"):
@@ -121,6 +126,7 @@ class Grid:
             check_real("clutter_rate", clutter, low=0.0)
         check_integer("runs", self.runs, low=1)
         check_integer("first_seed", self.first_seed, low=0)
+        check_choice("trajectory", self.trajectory, TRAJECTORY_MODES)
 
     def units(self) -> list[RunUnit]:
         units = []
@@ -132,6 +138,8 @@ class Grid:
                         "noise_std": float(noise),
                         "clutter_rate": float(clutter),
                     }
+                    if self.trajectory != "fixed":
+                        env_kwargs["trajectory"] = self.trajectory
                     for tracker in self.trackers:
                         spec = tracker_spec(tracker)
                         kwargs = dict(spec.kwargs)

@@ -19,7 +19,7 @@ from dgpt_gym import make_tracker, register_tracker
 from dgpt_gym.benchmark import cli as evaluate_cli
 from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.benchmark.outputs import write_outputs
-from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore
+from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore, run_key
 from dgpt_gym.benchmark.sweep import Grid, run_sweep, summarize_store, sweep_units, verify_store
 from dgpt_gym.benchmark.windows import tuned_kwargs
 
@@ -201,6 +201,29 @@ def test_grids_validate_their_arguments():
         Grid(trackers=("gp",), runs=0)
     with pytest.raises(ValueError, match="noise_std"):
         Grid(trackers=("gp",), noise_levels=(-1.0,))
+    with pytest.raises(ValueError, match=r"trajectory must be one of \['fixed', 'random'\]"):
+        Grid(trackers=("gp",), trajectory="circle")
+
+
+def test_a_random_path_grid_runs_random_paths_and_keeps_the_fixed_grids_keys(tmp_path):
+    """A grid's runs on random paths are the episodes of ``trajectory="random"`` (another
+    path from the reference one); the default grid's keys are those of runs whose
+    environment arguments do not name the path mode, as stored before the field existed."""
+    cell = dict(trackers=("centroid",), scenarios=("S2",), clutter_rates=(1.0,), runs=1)
+    fixed, random = Grid(**cell).units()[0], Grid(**cell, trajectory="random").units()[0]
+    assert fixed.key == run_key("centroid", fixed.tracker_kwargs, fixed.env_kwargs, 0)
+    assert "trajectory" not in fixed.env_kwargs and fixed.key != random.key
+    run_sweep([Grid(**cell, trajectory="random")], tmp_path, workers=1, progress=False)
+    with ResultsStore(tmp_path) as store:
+        (row,) = store.rows(status="ok")
+    env = gym.make("DGPTrack-v0", scenario="S2", clutter_rate=1.0, trajectory="random")
+    direct = run_episode(env, make_tracker("centroid"), 0).metrics()
+    assert row["env_kwargs"]["trajectory"] == "random"
+    assert row["metrics"]["rmse_2d"] == direct["rmse_2d"]
+    reference = run_episode(
+        gym.make("DGPTrack-v0", scenario="S2", clutter_rate=1.0), make_tracker("centroid"), 0
+    )
+    assert reference.metrics()["rmse_2d"] != direct["rmse_2d"]
 
 
 def test_overlapping_grids_run_each_unit_once():
