@@ -1,6 +1,7 @@
 """The command-line scripts, run as a user runs them."""
 
 import csv
+import importlib.util
 import os
 import re
 import subprocess
@@ -21,6 +22,14 @@ from agents.rl.heuristics import HEURISTIC_GRIDS
 from dgpt_gym.benchmark.cli import with_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def load_script(name):
+    """The module of ``scripts/<name>.py``, imported without running its command."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def run_script(name, *args, env=None):
@@ -438,18 +447,12 @@ def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
     the last place gets another digest (the script exists to show that a speed change
     leaves every bit alone), the same episode the same one; a batched sensor environment
     under the same seeds gives the same digest twice."""
-    import importlib.util
-
     import gymnasium as gym
 
     from dgpt_gym.benchmark.episodes import run_episode
     from dgpt_gym.registry import make_tracker
 
-    spec = importlib.util.spec_from_file_location(
-        "fingerprint", ROOT / "scripts" / "fingerprint.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("fingerprint")
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=1.0)
     result = run_episode(env, make_tracker("dgpt-rbcm"), 0)
     again = run_episode(env, make_tracker("dgpt-rbcm"), 0)
@@ -464,13 +467,7 @@ def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
 def test_calibration_misses_tallies_by_hand():
     """scripts/calibration_misses.py's table on four hand-made steps: the share of axes
     outside 3 sigma and the median and mean of z_x^2 + z_y^2 per group."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "calibration_misses", ROOT / "scripts" / "calibration_misses.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("calibration_misses")
     # (z_x, z_y, steps since a gap, target points, turning)
     steps = np.array(
         [
@@ -497,7 +494,6 @@ def test_clairvoyant_imitation_records_advantages_and_acts_on_them(tmp_path):
     zero and the best is at least zero), and the learned policy takes the setting with the
     highest predicted advantage, the fallback where none is above zero (a tree fitted to a
     planted rule)."""
-    import importlib.util
     import json
 
     import gymnasium as gym
@@ -535,11 +531,7 @@ def test_clairvoyant_imitation_records_advantages_and_acts_on_them(tmp_path):
     assert np.ptp(replayed) > 0  # a step where the window matters
     np.testing.assert_allclose(advantages[20], np.array(replayed) - replayed[best_column])
 
-    spec = importlib.util.spec_from_file_location(
-        "clairvoyant_imitation", ROOT / "scripts" / "clairvoyant_imitation.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("clairvoyant_imitation")
     x = np.linspace(0, 1, 40)[:, None]
     y = np.zeros((40, 3))
     y[x[:, 0] > 0.5, 2] = 1.0  # the third setting pays above 0.5
@@ -574,15 +566,9 @@ def test_agent_actions_classifies_tuning_steps_in_metres():
     """scripts/agent_actions.py's situations of a tuning task: a silent step first, then an
     innovation above 10 m (observed in sensing ranges, so the range converts it), then the
     number of experts."""
-    import importlib.util
-
     from agents.rl.features import FEATURE_NAMES
 
-    spec = importlib.util.spec_from_file_location(
-        "agent_actions", ROOT / "scripts" / "agent_actions.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("agent_actions")
     index = {name: i for i, name in enumerate(FEATURE_NAMES)}
 
     def situation(experts, innovation_m, silent, sensing_range):
@@ -598,3 +584,42 @@ def test_agent_actions_classifies_tuning_steps_in_metres():
         assert situation(2, 9.0, 0, sensing_range) == names[0]
         assert situation(3, 11.0, 0, sensing_range) == names[2]
         assert situation(3, 11.0, 1, sensing_range) == names[3]
+
+
+def test_fault_check_faults_are_in_todays_code_and_stale_ones_are_named():
+    """scripts/fault_check.py: each listed fault's text occurs exactly once in the code it
+    names and the fault changes it (else the check would test an unchanged copy); a text
+    that is not there, or is there twice, is a ValueError that names the fault."""
+    module = load_script("fault_check")
+    names = [fault.name for fault in module.FAULTS]
+    assert len(set(names)) == len(names)
+    for fault in module.FAULTS:
+        text = (ROOT / fault.path).read_text()
+        assert module.faulty_text(text, fault) != text
+    fault = module.FAULTS[0]
+    with pytest.raises(ValueError, match=f"fault '{fault.name}'.* 0 times"):
+        module.faulty_text("", fault)
+    with pytest.raises(ValueError, match=f"fault '{fault.name}'.* 2 times"):
+        module.faulty_text(fault.old + fault.old, fault)
+
+
+def test_fault_check_tells_a_caught_fault_from_a_survived_one():
+    """scripts/fault_check.py on the aggregation tests: a wrong gamma (Theorem 1's
+    2 log(M / delta) halved) makes a test fail, a fault that changes nothing does not, and
+    the working tree is left as it was."""
+    module = load_script("fault_check")
+    tests = ("tests/test_agents/test_aggregation.py",)
+    source = ROOT / "agents" / "aggregation.py"
+    before = source.read_text()
+    old = "return 2.0 * np.log(np.maximum(np.asarray(n_experts, dtype=float), 1.0) / delta)"
+    wrong = module.Fault(
+        "gamma-halved", "", "agents/aggregation.py", old, old.replace("2.0", "1.0")
+    )
+    outcome, failed, _ = module.check_fault(wrong, tests)
+    assert outcome == "caught"
+    assert failed and all(
+        test.startswith("tests/test_agents/test_aggregation.py::") for test in failed
+    )
+    inert = module.Fault("inert", "", "agents/aggregation.py", old, old + "  # unchanged")
+    assert module.check_fault(inert, tests)[:2] == ("**survived**", [])
+    assert source.read_text() == before
