@@ -65,19 +65,27 @@ def rng():
     return np.random.default_rng(12345)
 
 
-def sensed_calibration(tracker: str, scenario: str, seeds, clutter_rate: float = 1.0):
-    """``(coverage (2,), NEES (n,), n)`` of a registered tracker over the steps where a
-    sensor senses the target, pooled over one episode per seed (sigma_z 1): the share of
-    those steps whose error is within 3 standard deviations, per axis, and the 2-D NEES of
-    every step (median nominal 1.39)."""
-    errors, variances = [], []
+def sensed_steps(tracker: str, scenario: str, seeds, clutter_rate: float = 1.0):
+    """``(errors, variances, ucbs)``, each (n, 2): a registered tracker's estimate errors,
+    reported variances and UCB half-widths on the steps where a sensor senses the target,
+    pooled over one episode per seed (sigma_z 1)."""
+    errors, variances, ucbs = [], [], []
     for seed in seeds:
         env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=clutter_rate)
         result = run_episode(env, make_tracker(tracker), seed)
         sensed = result.n_detecting > 0
         errors.append((result.mean - result.truth)[sensed])
         variances.append(result.var[sensed])
-    errors, variances = np.concatenate(errors), np.concatenate(variances)
+        ucbs.append(result.ucb[sensed])
+    return np.concatenate(errors), np.concatenate(variances), np.concatenate(ucbs)
+
+
+def sensed_calibration(tracker: str, scenario: str, seeds, clutter_rate: float = 1.0):
+    """``(coverage (2,), NEES (n,), n)`` of a registered tracker over the steps where a
+    sensor senses the target (:func:`sensed_steps`): the share of those steps whose error
+    is within 3 standard deviations, per axis, and the 2-D NEES of every step (median
+    nominal 1.39)."""
+    errors, variances, _ = sensed_steps(tracker, scenario, seeds, clutter_rate)
     coverage = np.mean(np.abs(errors) <= 3.0 * np.sqrt(variances), axis=0)
     return coverage, np.sum(errors**2 / variances, axis=1), errors.shape[0]
 

@@ -17,6 +17,7 @@ from conftest import (
     mixture_moments,
     problem_spec,
     sensed_calibration,
+    sensed_steps,
 )
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -859,6 +860,24 @@ def test_is_calibrated_on_sensed_steps_at_clutter_1(tracker, scenario):
     assert n > 600
     assert np.all(coverage >= 0.99 - 3.0 * np.sqrt(0.99 * 0.01 / n)), coverage
     assert median_in_band(nees, 0.7, 2.8), (np.median(nees), np.mean(nees < 0.7))
+
+
+@pytest.mark.parametrize("scenario", ["S1", "S2", "S3", "S4"])
+def test_the_ucb_covers_the_sensed_steps_without_being_wide(scenario):
+    """Issue 12's UCB goals for DGPT-RBCM on sensed steps, sigma_z 1, clutter 1, six
+    training-seed episodes (666-774 sensed steps): coverage per axis >= 99.7 % less three
+    binomial standard errors (about 0.6 points), and on S1 and S2 a mean half-width at most 4
+    times the RMSE. Measured in 0.23.1: coverage 100 % in every cell; half-width / RMSE
+    1.3-3.0 on S1 and S2, 4.1-4.6 on S3 and S4, where the goal is not met (the grid's worst
+    cell on detected steps: 4.35; docs/analysis.md), so their width is not asserted."""
+    errors, _, ucbs = sensed_steps("dgpt-rbcm", scenario, range(1000, 1006))
+    n = errors.shape[0]
+    assert n > 600
+    coverage = np.mean(np.abs(errors) <= ucbs, axis=0)
+    assert np.all(coverage >= 0.997 - 3.0 * np.sqrt(0.997 * 0.003 / n)), coverage
+    if scenario in ("S1", "S2"):
+        width_over_rmse = np.mean(ucbs, axis=0) / np.sqrt(np.mean(errors**2, axis=0))
+        assert np.all(width_over_rmse <= 4.0), width_over_rmse
 
 
 def test_window_steps_span_the_gaps_between_steps_with_data():
