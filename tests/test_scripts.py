@@ -623,3 +623,48 @@ def test_fault_check_tells_a_caught_fault_from_a_survived_one():
     inert = module.Fault("inert", "", "agents/aggregation.py", old, old + "  # unchanged")
     assert module.check_fault(inert, tests)[:2] == ("**survived**", [])
     assert source.read_text() == before
+
+
+def test_random_paths_tables_by_hand():
+    """scripts/random_paths.py's tables from hand-made episodes: the RMS over episodes, the
+    random / reference ratio (RMS 7.07 over 3.54 = 2), the paired difference to dgpt-rbcm
+    and the calibration columns."""
+    module = load_script("random_paths")
+
+    def episodes(rmse, coverage=0.99, nees=1.5):
+        return [
+            {
+                "rmse_2d": value,
+                "coverage_3sigma_x_detected": coverage,
+                "coverage_3sigma_y_detected": 1.0,
+                "nees_median_detected": nees,
+            }
+            for value in rmse
+        ]
+
+    cells = [(s, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
+    fixed = {(t, s, c): episodes([3.0, 4.0]) for t in ("dgpt-rbcm", "other") for s, c in cells}
+    random = {(t, s, c): episodes([6.0, 8.0]) for s, c in cells for t in ("dgpt-rbcm",)}
+    random |= {("other", s, c): episodes([7.0, 10.0], 0.5, 2.0) for s, c in cells}
+    text = module.report(fixed, random, ["dgpt-rbcm", "other"])
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert rows[0].split(" | ")[1] == "7.07 (3.54)"  # RMS of 6, 8 and of 3, 4
+    assert rows[2].split(" | ")[1].startswith("**2.00** [")
+    # other - dgpt-rbcm: 1 and 2 m, mean 1.5, t interval 12.71 x 0.5 / sqrt(2) x sqrt(2)
+    assert rows[5].split(" | ")[1] == f"+1.50 ± {stats.t.ppf(0.975, 1) * 0.5:.2f}"
+    assert rows[7].split(" | ")[1] == "50.0 / 100.0, 2.00"
+    value, low, high = module.ratio_interval([3.0, 4.0, 5.0], [6.0, 8.0, 10.0])
+    assert value == pytest.approx(2.0) and low <= value <= high
+
+
+def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
+    args = ["--trackers", "dgpt-rbcm", "centroid", "--runs", "2", "--workers", "1"]
+    args += ["--out", str(tmp_path), "--report", str(tmp_path / "report.md"), "--no-progress"]
+    first = run_script("random_paths.py", *args)
+    assert first.returncode == 0, first.stderr
+    # 2 trackers x 8 cells x 2 seeds in each mode
+    assert "fixed paths: 32 runs" in first.stdout and "random paths: 32 runs" in first.stdout
+    again = run_script("random_paths.py", *args)
+    assert "random paths: 0 runs, 32 already stored" in again.stdout
+    report = (tmp_path / "report.md").read_text()
+    assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
