@@ -650,7 +650,7 @@ def test_random_paths_tables_by_hand():
     rows = [line for line in text.splitlines() if line.startswith("| `")]
     assert rows[0].split(" | ")[1] == "7.07 (3.54)"  # RMS of 6, 8 and of 3, 4
     assert rows[2].split(" | ")[1].startswith("**2.00** [")
-    # other - dgpt-rbcm: 1 and 2 m, mean 1.5, t interval 12.71 x 0.5 / sqrt(2) x sqrt(2)
+    # other - dgpt-rbcm: 1 and 2 m, mean 1.5; half-width t(0.975, 1) x sd 0.707 / sqrt(2)
     assert rows[5].split(" | ")[1] == f"+1.50 ± {stats.t.ppf(0.975, 1) * 0.5:.2f}"
     assert rows[7].split(" | ")[1] == "50.0 / 100.0, 2.00"
     value, low, high = module.ratio_interval([3.0, 4.0, 5.0], [6.0, 8.0, 10.0])
