@@ -10,8 +10,9 @@ The working tree is never touched: each fault is applied in a fresh temporary co
 ``agents``, ``baselines``, ``dgpt_gym``, ``scripts``, ``tests`` and ``pyproject.toml``,
 and pytest runs there; the table counts the tests that fail and names a few. Before the
 faults the unchanged copy must pass the same tests, or the check stops. A fault whose text
-is no longer in the code is an error that names it, so the list cannot silently go stale. Writes a Markdown table (``--out``, rewritten after every fault, so an
-interrupted run keeps the rows it finished). About 25 min on one core.
+is no longer in the code is an error that names it, so the list cannot silently go stale.
+Writes a Markdown table (``--out``, rewritten after every fault, so an interrupted run
+keeps the rows it finished). About 25 min on one core.
 
     python scripts/fault_check.py --out docs/fault_check.md
     python scripts/fault_check.py --faults hybrid-update-skipped hybrid-bound-x0.1
