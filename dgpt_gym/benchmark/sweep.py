@@ -492,7 +492,15 @@ def verify_store(
 def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:
     """Per-cell summaries (:func:`summarize_runs`, seeds in order, and the dgpt-gym
     ``versions`` that produced the runs) of the sweep's finished runs in the store at
-    ``out``, in the grids' order, and the stored rows of its failed runs."""
+    ``out``, in the grids' order, and the stored rows of its failed runs. The grids must
+    share one path mode (a cell does not name it)."""
+    grids = list(grids)
+    modes = sorted({grid.trajectory for grid in grids})
+    if len(modes) > 1:
+        raise ValueError(
+            f"grids must share one trajectory to be summarised together; got {modes}: "
+            "summarise each path mode on its own"
+        )
     units = sweep_units(grids)
     keys = {unit.key for unit in units}
     with ResultsStore(out) as store:

@@ -224,6 +224,8 @@ def test_a_random_path_grid_runs_random_paths_and_keeps_the_fixed_grids_keys(tmp
         gym.make("DGPTrack-v0", scenario="S2", clutter_rate=1.0), make_tracker("centroid"), 0
     )
     assert reference.metrics()["rmse_2d"] != direct["rmse_2d"]
+    with pytest.raises(ValueError, match=r"share one trajectory.*\['fixed', 'random'\]"):
+        summarize_store([Grid(**cell), Grid(**cell, trajectory="random")], tmp_path)
 
 
 def test_overlapping_grids_run_each_unit_once():
