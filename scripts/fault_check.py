@@ -244,9 +244,8 @@ def table(rows) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     for fault, outcome, failed, seconds in rows:
-        shown = "<br>".join(f"`{test.removeprefix('tests/test_agents/')}`" for test in failed)
-        if len(failed) > SHOWN_TESTS:
-            shown = "<br>".join(shown.split("<br>")[:SHOWN_TESTS]) + "<br>..."
+        names = [f"`{test.removeprefix('tests/test_agents/')}`" for test in failed]
+        shown = "<br>".join(names[:SHOWN_TESTS] + ["..."] * (len(names) > SHOWN_TESTS))
         lines.append(
             f"| `{fault.name}` | {fault.description} | `{fault.path}` | {outcome} "
             f"| {len(failed)} | {shown or '-'} | {seconds:.0f} |"

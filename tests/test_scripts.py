@@ -601,6 +601,13 @@ def test_fault_check_faults_are_in_todays_code_and_stale_ones_are_named():
         module.faulty_text("", fault)
     with pytest.raises(ValueError, match=f"fault '{fault.name}'.* 2 times"):
         module.faulty_text(fault.old + fault.old, fault)
+    # the table counts every failing test and names the first SHOWN_TESTS (3)
+    failed = [f"tests/test_agents/test_a.py::test_{i}" for i in range(4)]
+    row = module.table([(fault, "caught", failed, 12.0)]).splitlines()[-1]
+    assert row.endswith(
+        "| caught | 4 | `test_a.py::test_0`<br>`test_a.py::test_1`<br>"
+        "`test_a.py::test_2`<br>... | 12 |"
+    )
 
 
 def test_fault_check_tells_a_caught_fault_from_a_survived_one():
