@@ -39,13 +39,13 @@ sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
-from dgpt_gym.benchmark.store import ResultsStore  # noqa: E402
-from dgpt_gym.benchmark.sweep import Grid, run_sweep  # noqa: E402
+from dgpt_gym.benchmark.sweep import Grid, run_sweep, stored_metrics  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
 REFERENCE = "dgpt-rbcm"
 SCENARIOS = ("S1", "S2", "S3", "S4")
 CLUTTER_RATES = (1.0, 5.0)
+NOISE_STD = 1.0
 GOAL_RATIO = 1.3
 """Issue 12's goal 4: random-path RMSE at most this times the reference paths'."""
 RESAMPLES = 2000
@@ -58,7 +58,7 @@ def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
         mode: Grid(
             trackers=tuple(trackers),
             scenarios=SCENARIOS,
-            noise_levels=(1.0,),
+            noise_levels=(NOISE_STD,),
             clutter_rates=CLUTTER_RATES,
             runs=runs,
             first_seed=first_seed,
@@ -66,22 +66,6 @@ def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
         )
         for mode in ("fixed", "random")
     }
-
-
-def stored_episodes(grid: Grid, out: Path) -> dict[tuple[str, str, float], list[dict]]:
-    """The metrics of ``grid``'s finished runs in the store at ``out``, by (tracker,
-    scenario, clutter rate), in seed order; a ValueError if a run is missing or failed."""
-    units = grid.units()
-    with ResultsStore(out) as store:
-        rows = {row["run_key"]: row for row in store.rows({unit.key for unit in units})}
-    episodes: dict[tuple[str, str, float], list[dict]] = {}
-    for unit in units:
-        row = rows.get(unit.key)
-        if row is None or row["status"] != "ok":
-            raise ValueError(f"run {unit.cell} seed {unit.seed} ({grid.trajectory}) is not stored")
-        key = (unit.tracker, unit.env_kwargs["scenario"], unit.env_kwargs["clutter_rate"])
-        episodes.setdefault(key, []).append(row["metrics"])
-    return episodes
 
 
 def root_mean_square(values, axis=-1):
@@ -116,7 +100,9 @@ def report(fixed: dict, random: dict, trackers) -> str:
     header = "| tracker | " + " | ".join(names) + " |\n|---|" + "---|" * len(cells)
 
     def column(episodes, tracker, scenario, clutter, key):
-        return np.array([run[key] for run in episodes[(tracker, scenario, clutter)]], float)
+        return np.array(
+            [run[key] for run in episodes[(tracker, scenario, NOISE_STD, clutter)]], float
+        )
 
     ratios, rmse, paired, calibration = [header], [header], [header], [header]
     for tracker in trackers:
@@ -204,7 +190,7 @@ def main(argv=None) -> None:
         print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
         if done.failed:
             raise SystemExit(f"{done.failed} runs failed, e.g. {done.errors[0]}")
-    episodes = {mode: stored_episodes(grid, args.out) for mode, grid in grids.items()}
+    episodes = {mode: stored_metrics(grid, args.out) for mode, grid in grids.items()}
     text = report(episodes["fixed"], episodes["random"], args.trackers)
     command = "python scripts/random_paths.py " + " ".join(sys.argv[1:] if argv is None else argv)
     text = (

@@ -649,10 +649,10 @@ def test_random_paths_tables_by_hand():
             for value in rmse
         ]
 
-    cells = [(s, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
-    fixed = {(t, s, c): episodes([3.0, 4.0]) for t in ("dgpt-rbcm", "other") for s, c in cells}
-    random = {(t, s, c): episodes([6.0, 8.0]) for s, c in cells for t in ("dgpt-rbcm",)}
-    random |= {("other", s, c): episodes([7.0, 10.0], 0.5, 2.0) for s, c in cells}
+    cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
+    fixed = {(t, *cell): episodes([3.0, 4.0]) for t in ("dgpt-rbcm", "other") for cell in cells}
+    random = {("dgpt-rbcm", *cell): episodes([6.0, 8.0]) for cell in cells}
+    random |= {("other", *cell): episodes([7.0, 10.0], 0.5, 2.0) for cell in cells}
     text = module.report(fixed, random, ["dgpt-rbcm", "other"])
     rows = [line for line in text.splitlines() if line.startswith("| `")]
     assert rows[0].split(" | ")[1] == "7.07 (3.54)"  # RMS of 6, 8 and of 3, 4
@@ -675,3 +675,51 @@ def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     assert "random paths: 0 runs, 32 already stored" in again.stdout
     report = (tmp_path / "report.md").read_text()
     assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
+
+
+def test_ablations_tables_by_hand():
+    """scripts/ablations.py's tables from hand-made episodes: the paired difference per cell
+    with its t interval, the cells' stratified mean and interval, and the summary row."""
+    module = load_script("ablations")
+    # strata of unequal size: means 1 and 11; variances of the mean 2 / 2 and 3 / 3
+    mean, half = module.stratified_difference([np.array([0.0, 2.0]), np.array([10, 10, 13.0])])
+    assert mean == pytest.approx(6.0)
+    assert half == pytest.approx(stats.norm.ppf(0.975) * np.sqrt(2.0) / 2)
+
+    def episodes(rmse):
+        return [
+            {
+                "rmse_2d": value,
+                "coverage_3sigma_x_detected": 0.99,
+                "coverage_3sigma_y_detected": 1.0,
+                "nees_median_detected": value / 2,
+            }
+            for value in rmse
+        ]
+
+    cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
+    by_mode = {
+        mode: {
+            **{(module.REFERENCE, *cell): episodes([3.0, 4.0]) for cell in cells},
+            **{("gp", *cell): episodes([4.0, 6.0]) for cell in cells},
+        }
+        for mode in module.PATH_MODES
+    }
+    text = module.report(by_mode, ["gp"])
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| `gp`")]
+    assert len(rows) == 3  # one per path mode and the summary
+    # gp - dgpt-rbcm: 1 and 2 m in every cell; over 8 equal cells 1.96 sqrt(8 x 0.25) / 8
+    assert rows[0][1] == f"+1.50 ± {stats.t.ppf(0.975, 1) * 0.5:.2f}"  # not bold: 6.35 wide
+    assert rows[0][-1] == "**+1.50 ± 0.35** |"
+    # RMS of 4 and 6; coverage (99 + 100) / 2; the median of 2 and 3
+    assert rows[2][2:] == ["5.10 / 5.10", "99.50 / 99.50", "2.50 / 2.50 |"]
+
+
+def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
+    args = ["--arms", "dgpt-rbcm/no-learning", "--runs", "1", "--workers", "1"]
+    args += ["--out", str(tmp_path), "--report", str(tmp_path / "report.md"), "--no-progress"]
+    result = run_script("ablations.py", *args)
+    assert result.returncode == 0, result.stderr
+    # 2 trackers x 8 cells x 1 seed in each mode
+    assert "fixed paths: 16 runs" in result.stdout and "random paths: 16 runs" in result.stdout
+    assert (tmp_path / "report.md").read_text().count("| `dgpt-rbcm/no-learning` |") == 3

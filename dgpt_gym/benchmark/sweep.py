@@ -37,12 +37,13 @@ from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRAC
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
 from dgpt_gym.env import TRAJECTORY_MODES
-from dgpt_gym.registry import TrackerSpec, tracker_spec
+from dgpt_gym.registry import TrackerSpec, tracker_ids, tracker_spec
 from dgpt_gym.scenarios import get_scenario
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
 __all__ = [
     "Grid",
+    "Variant",
     "RunUnit",
     "SweepReport",
     "run_unit",
@@ -56,6 +57,7 @@ __all__ = [
     "VerifyReport",
     "verify_store",
     "sweep_units",
+    "stored_metrics",
     "QUICK_SWEEP",
     "PAPER_SWEEP",
     "STANDARD_TRACKERS",
@@ -92,16 +94,43 @@ class RunUnit:
 
 
 @dataclass(frozen=True)
+class Variant:
+    """A registered tracker with some constructor arguments changed, run under its own
+    ``name``: one arm of an ablation. ``overrides`` (pairs of argument name and value) are
+    applied after the registered arguments and the tuned window of ``base``; for example
+    ``Variant("dgpt-rbcm/no-turn-modes", "dgpt-rbcm", (("turn_rates", ()),))``. The name
+    must not be a registered id, and the arguments are checked by building one tracker."""
+
+    name: str
+    base: str
+    overrides: tuple[tuple[str, object], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name must be a non-empty string; got {self.name!r}")
+        if self.name in tracker_ids():
+            raise ValueError(
+                f"name must not be a registered tracker id (its runs would be reported as "
+                f"that tracker's); got {self.name!r}"
+            )
+        spec = tracker_spec(self.base)
+        # build one tracker now, so that an unknown or invalid argument fails here and not
+        # in every run of the sweep
+        spec.load()(**{**spec.kwargs, **dict(self.overrides)})
+
+
+@dataclass(frozen=True)
 class Grid:
     """Every tracker on every (scenario, noise_std, clutter_rate) cell, seeds
     ``first_seed .. first_seed + runs - 1`` (the same seeds give every tracker the same
-    measurements). With ``tuned_windows`` the GP trackers use the window tuned for the
-    scenario (:mod:`dgpt_gym.benchmark.tuning`). ``trajectory``: the environment's path
+    measurements). A tracker is a registered id or a :class:`Variant` of one. With
+    ``tuned_windows`` the GP trackers use the window tuned for the scenario
+    (:mod:`dgpt_gym.benchmark.tuning`). ``trajectory``: the environment's path
     mode (:data:`dgpt_gym.env.TRAJECTORY_MODES`); ``"fixed"``, the paper's reference
     paths, leaves it out of the runs' environment arguments, so their keys in the store are
     those of the grids without the field."""
 
-    trackers: tuple[str, ...]
+    trackers: tuple[str | Variant, ...]
     scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4")
     noise_levels: tuple[float, ...] = (1.0,)
     clutter_rates: tuple[float, ...] = (1.0, 5.0)
@@ -117,7 +146,8 @@ class Grid:
                     f"{name} must be a non-empty sequence; got {getattr(self, name)!r}"
                 )
         for tracker in self.trackers:
-            tracker_spec(tracker)
+            if not isinstance(tracker, Variant):
+                tracker_spec(tracker)
         for scenario in self.scenarios:
             get_scenario(scenario)
         for noise in self.noise_levels:
@@ -141,14 +171,18 @@ class Grid:
                     if self.trajectory != "fixed":
                         env_kwargs["trajectory"] = self.trajectory
                     for tracker in self.trackers:
-                        spec = tracker_spec(tracker)
+                        name, base, overrides = (
+                            (tracker.name, tracker.base, tracker.overrides)
+                            if isinstance(tracker, Variant)
+                            else (tracker, tracker, ())
+                        )
+                        spec = tracker_spec(base)
                         kwargs = dict(spec.kwargs)
                         if self.tuned_windows:
-                            kwargs.update(tuned_kwargs(tracker, scenario))
+                            kwargs.update(tuned_kwargs(base, scenario))
+                        kwargs.update(overrides)
                         for seed in range(self.first_seed, self.first_seed + self.runs):
-                            units.append(
-                                RunUnit(tracker, spec.entry_point, kwargs, env_kwargs, seed)
-                            )
+                            units.append(RunUnit(name, spec.entry_point, kwargs, env_kwargs, seed))
         return units
 
 
@@ -487,6 +521,25 @@ def verify_store(
                 + (f"; and {len(differing) - 3} more" if len(differing) > 3 else "")
             )
     return VerifyReport(len(chosen), len(rows) - len(mine), tuple(mismatches))
+
+
+def stored_metrics(grid: Grid, out: str | Path) -> dict[tuple, list[dict]]:
+    """The metrics of ``grid``'s runs in the store at ``out``, by cell (:attr:`RunUnit.cell`),
+    in seed order; a ValueError names the first run that is missing or failed (run the grid
+    with :func:`run_sweep` first)."""
+    units = grid.units()
+    with ResultsStore(out) as store:
+        rows = {row["run_key"]: row for row in store.rows({unit.key for unit in units})}
+    metrics: dict[tuple, list[dict]] = {}
+    for unit in units:
+        row = rows.get(unit.key)
+        if row is None or row["status"] != "ok":
+            state = "not stored" if row is None else "failed"
+            raise ValueError(
+                f"run {unit.cell} seed {unit.seed} ({grid.trajectory} paths) is {state} in {out}"
+            )
+        metrics.setdefault(unit.cell, []).append(row["metrics"])
+    return metrics
 
 
 def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:

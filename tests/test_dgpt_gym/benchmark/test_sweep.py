@@ -20,14 +20,22 @@ from dgpt_gym.benchmark import cli as evaluate_cli
 from dgpt_gym.benchmark.episodes import run_episode
 from dgpt_gym.benchmark.outputs import write_outputs
 from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore, run_key
-from dgpt_gym.benchmark.sweep import Grid, run_sweep, summarize_store, sweep_units, verify_store
+from dgpt_gym.benchmark.sweep import (
+    Grid,
+    Variant,
+    run_sweep,
+    stored_metrics,
+    summarize_store,
+    sweep_units,
+    verify_store,
+)
 from dgpt_gym.benchmark.windows import tuned_kwargs
 
 ROOT = Path(__file__).resolve().parents[3]
 DETERMINISTIC = ("step_time_ms",)  # wall-clock: the one metric that varies between runs
 
 
-def stored_metrics(folder) -> dict[str, dict]:
+def deterministic_metrics_by_key(folder) -> dict[str, dict]:
     with ResultsStore(folder) as store:
         return {
             row["run_key"]: {k: v for k, v in row["metrics"].items() if k not in DETERMINISTIC}
@@ -131,7 +139,7 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
                     finished = 0
     process.send_signal(signal.SIGKILL)
     process.wait()
-    before = stored_metrics(killed)
+    before = deterministic_metrics_by_key(killed)
     assert 5 <= len(before) < 30, "the kill must land part-way through the sweep"
 
     resumed = subprocess.run(
@@ -139,7 +147,7 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
     )
     assert resumed.returncode == 0, resumed.stderr
     assert f"30 runs: {len(before)} already in" in resumed.stdout
-    after = stored_metrics(killed)
+    after = deterministic_metrics_by_key(killed)
     with sqlite3.connect(database) as connection:
         assert connection.execute("SELECT COUNT(*) FROM runs").fetchone() == (30,)
         seeds = [s for (s,) in connection.execute("SELECT seed FROM runs ORDER BY seed")]
@@ -150,7 +158,7 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
     clean = tmp_path / "clean"
     uninterrupted = subprocess.run([*args, "--out", str(clean)], capture_output=True, text=True)
     assert uninterrupted.returncode == 0, uninterrupted.stderr
-    assert stored_metrics(clean) == after
+    assert deterministic_metrics_by_key(clean) == after
     for name in ("results_tables.md", "results_uncertainty.md"):
         assert without_command_lines(killed / name) == without_command_lines(clean / name)
 
@@ -171,7 +179,9 @@ def test_local_pool_and_dask_cluster_give_identical_rows(tmp_path):
             [grid], tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False
         )
     assert local.ran == remote.ran == 6 and local.failed == remote.failed == 0
-    assert stored_metrics(tmp_path / "local") == stored_metrics(tmp_path / "dask")
+    assert deterministic_metrics_by_key(tmp_path / "local") == deterministic_metrics_by_key(
+        tmp_path / "dask"
+    )
 
 
 def test_a_failing_run_is_recorded_and_the_sweep_completes(tmp_path):
@@ -226,6 +236,37 @@ def test_a_random_path_grid_runs_random_paths_and_keeps_the_fixed_grids_keys(tmp
     assert reference.metrics()["rmse_2d"] != direct["rmse_2d"]
     with pytest.raises(ValueError, match=r"share one trajectory.*\['fixed', 'random'\]"):
         summarize_store([Grid(**cell), Grid(**cell, trajectory="random")], tmp_path)
+
+
+def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path):
+    """A :class:`Variant`'s runs are the base tracker's episodes with the changed argument,
+    stored under the variant's name, and :func:`stored_metrics` returns them by cell in seed
+    order, beside the base's own runs, which are different."""
+    narrow = Variant("centroid/gate-10", "centroid", (("gate_radius", 10.0),))
+    grid = Grid(trackers=("centroid", narrow), scenarios=("S1",), clutter_rates=(5.0,), runs=2)
+    assert [unit.tracker for unit in grid.units()] == ["centroid"] * 2 + ["centroid/gate-10"] * 2
+    with pytest.raises(ValueError, match="not stored"):
+        stored_metrics(grid, tmp_path)
+    run_sweep([grid], tmp_path, workers=1, progress=False)
+    metrics = stored_metrics(grid, tmp_path)
+    env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
+    for seed in (0, 1):
+        direct = run_episode(env, make_tracker("centroid", gate_radius=10.0), seed).metrics()
+        default = run_episode(env, make_tracker("centroid"), seed).metrics()
+        assert metrics[("centroid/gate-10", "S1", 1.0, 5.0)][seed]["rmse_2d"] == direct["rmse_2d"]
+        assert metrics[("centroid", "S1", 1.0, 5.0)][seed]["rmse_2d"] == default["rmse_2d"]
+        assert direct["rmse_2d"] != default["rmse_2d"]
+
+
+def test_variants_validate_their_name_and_arguments():
+    with pytest.raises(ValueError, match="registered tracker id.*'pda'"):
+        Variant("pda", "centroid", (("gate_radius", 10.0),))
+    with pytest.raises(TypeError, match="gate_width"):
+        Variant("centroid/x", "centroid", (("gate_width", 10.0),))
+    with pytest.raises(ValueError, match="gate_radius"):
+        Variant("centroid/x", "centroid", (("gate_radius", -1.0),))
+    with pytest.raises(ValueError, match="tracker must be one of"):
+        Variant("x/y", "no-such-tracker")
 
 
 def test_overlapping_grids_run_each_unit_once():

@@ -1,0 +1,230 @@
+"""What each part of the default GP tracker buys: ``dgpt-rbcm`` against the centralized GP,
+the other three aggregations and the tracker with one part of its model taken out, paired by
+seed on the evaluation seeds (0-99 by default), on the reference and the random paths, S1-S4,
+clutter rates 1 and 5, sigma_z = 1. No setting is chosen here; every arm keeps
+``dgpt-rbcm``'s other settings.
+
+Printed and written to ``--report`` (Markdown):
+
+- per path mode and cell, each arm's mean episode 2-D RMSE minus ``dgpt-rbcm``'s on the same
+  seeds (m), with its 95 % t interval, and over the 8 cells (the cells' mean, whose
+  interval adds the cells' variances of the mean: the cells are strata of equal size);
+- per arm over all cells of a path mode: the root mean square of the episodes' RMSE, the
+  3-sigma coverage on steps where a sensor senses the target (mean of the axes over the
+  episodes; nominal 99.73 %) and the median over episodes of the median 2-D NEES there
+  (nominal 1.39).
+
+The runs go through the evaluation's results store (``--out``, resumable, each run stored
+as it finishes). ``--out results/paper`` reuses the runs that the ``--paper`` grid and
+``scripts/random_paths.py`` stored there (``dgpt-rbcm``, ``gp`` and ``dgpt-gpoe`` on both
+path modes), which are the same runs.
+
+    python scripts/ablations.py --out results/paper --report docs/ablations.md
+    python scripts/ablations.py --arms gp dgpt-rbcm/no-turn-modes --runs 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import dgpt_gym  # noqa: E402
+from agents.state_space_dgpt import PROCESS_NOISE_BOUNDS  # noqa: E402
+from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
+from dgpt_gym.benchmark.sweep import Grid, Variant, run_sweep, stored_metrics  # noqa: E402
+
+REFERENCE = "dgpt-rbcm"
+SCENARIOS = ("S1", "S2", "S3", "S4")
+CLUTTER_RATES = (1.0, 5.0)
+NOISE_STD = 1.0
+PATH_MODES = ("fixed", "random")
+
+
+def _without(name: str, **overrides) -> Variant:
+    return Variant(f"{REFERENCE}/{name}", REFERENCE, tuple(overrides.items()))
+
+
+ARMS = {
+    "gp": ("the centralized GP: one Kalman update on every summary", "gp"),
+    "dgpt-bcm": ("BCM aggregation, the exact posterior (the same numbers as `gp`)", "dgpt-bcm"),
+    "dgpt-gpoe": ("GPoE aggregation (weights 1/M)", "dgpt-gpoe"),
+    "dgpt-poe": ("PoE aggregation (weights 1)", "dgpt-poe"),
+    "dgpt-rbcm/no-learning": (
+        "q not learnt: held at its start, 1 m^2/s^3",
+        _without("no-learning", learn_process_noise=False),
+    ),
+    "dgpt-rbcm/q-floor": (
+        "q not learnt: held on its lower bound, 1e-4 m^2/s^3, where the learning ends on "
+        "most of S1's steps",
+        _without("q-floor", learn_process_noise=False, process_noise=PROCESS_NOISE_BOUNDS[0]),
+    ),
+    **{
+        f"dgpt-rbcm/window-{window}": (
+            f"q learnt from the last {window} steps with data instead of 4",
+            _without(f"window-{window}", window=window),
+        )
+        for window in (2, 8, 20)
+    },
+    "dgpt-rbcm/no-manoeuvres": (
+        "no manoeuvre component in the NCV mode (q_m = 0)",
+        _without("no-manoeuvres", manoeuvre_intensity=0.0),
+    ),
+    "dgpt-rbcm/no-turn-modes": (
+        "no coordinated-turn modes: the NCV mode alone",
+        _without("no-turn-modes", turn_rates=()),
+    ),
+    "dgpt-rbcm/no-silence": (
+        "coverage gaps predicted by the model alone, not conditioned on the silence of the "
+        "awake sensors",
+        _without("no-silence", silence_particles=0),
+    ),
+    "dgpt-rbcm/no-gating": (
+        "no association: each sensor's unweighted mean of its measurements",
+        _without("no-gating", gating=False),
+    ),
+    "dgpt-rbcm/local-association": (
+        "each sensor's measurements weighed on their own (eq. (27)), not jointly",
+        _without("local-association", association="local"),
+    ),
+}
+"""The arms, by name: what each changes against ``dgpt-rbcm`` and the tracker (a registered
+id or a :class:`~dgpt_gym.benchmark.sweep.Variant` of ``dgpt-rbcm``)."""
+
+
+def path_grids(arms, runs: int, first_seed: int) -> dict[str, Grid]:
+    """``dgpt-rbcm`` and ``arms`` (names of :data:`ARMS`) on S1-S4 x clutter 1, 5 at
+    sigma_z 1, by path mode."""
+    trackers = (REFERENCE, *(ARMS[name][1] for name in arms))
+    return {
+        mode: Grid(
+            trackers=trackers,
+            scenarios=SCENARIOS,
+            noise_levels=(NOISE_STD,),
+            clutter_rates=CLUTTER_RATES,
+            runs=runs,
+            first_seed=first_seed,
+            trajectory=mode,
+        )
+        for mode in PATH_MODES
+    }
+
+
+def stratified_difference(differences: list[np.ndarray]) -> tuple[float, float]:
+    """The mean over strata of equal weight of each stratum's mean paired difference, and
+    the half-width of its 95 % normal interval, 1.96 sqrt(sum_c s_c^2 / n_c) / C."""
+    means = [np.mean(values) for values in differences]
+    variances = [np.var(values, ddof=1) / len(values) for values in differences]
+    scale = stats.norm.ppf(0.975) * np.sqrt(np.sum(variances)) / len(differences)
+    return float(np.mean(means)), float(scale)
+
+
+def _signed(mean: float, half: float) -> str:
+    """``+m ± h``, bold when the interval excludes 0."""
+    bold = "**" if abs(mean) > half else ""
+    return f"{bold}{mean:+.2f} ± {half:.2f}{bold}"
+
+
+def report(episodes: dict[str, dict], arms) -> str:
+    """The Markdown tables of the module docstring from each path mode's stored metrics
+    (:func:`~dgpt_gym.benchmark.sweep.stored_metrics`, keyed by cell)."""
+    cells = [(s, c) for s in SCENARIOS for c in CLUTTER_RATES]
+    names = [f"{scenario} c{int(clutter)}" for scenario, clutter in cells]
+
+    def column(mode, tracker, scenario, clutter, key):
+        runs = episodes[mode][(tracker, scenario, NOISE_STD, clutter)]
+        return np.array([run[key] for run in runs], float)
+
+    lines = []
+    for mode in PATH_MODES:
+        lines += [
+            f"### {'Reference' if mode == 'fixed' else 'Random'} paths: episode RMSE minus "
+            f"`{REFERENCE}`'s, m",
+            "",
+            "| arm | " + " | ".join(names) + " | all cells |",
+            "|---|" + "---|" * (len(cells) + 1),
+        ]
+        for name in arms:
+            differences = [
+                column(mode, name, *cell, "rmse_2d") - column(mode, REFERENCE, *cell, "rmse_2d")
+                for cell in cells
+            ]
+            row = [_signed(np.mean(d), interval_half_width(d)) for d in differences]
+            row.append(_signed(*stratified_difference(differences)))
+            lines.append(f"| `{name}` | " + " | ".join(row) + " |")
+        lines.append("")
+    lines += [
+        "### Over all cells: RMSE and calibration on steps where a sensor senses the target",
+        "",
+        "Reference / random paths. RMSE: root mean square over the episodes of each "
+        "episode's 2-D RMSE, m. Coverage: 3-sigma, mean of the axes over the episodes, % "
+        "(nominal 99.73). NEES: median over episodes of the median 2-D NEES (nominal 1.39).",
+        "",
+        "| arm | what it changes | RMSE | 3-sigma coverage | median NEES |",
+        "|---|---|---|---|---|",
+    ]
+    for name in (REFERENCE, *arms):
+        rmse, coverage, nees = [], [], []
+        for mode in PATH_MODES:
+            values = np.concatenate([column(mode, name, *c, "rmse_2d") for c in cells])
+            rmse.append(f"{np.sqrt(np.mean(values**2)):.2f}")
+            axes = [
+                np.concatenate(
+                    [column(mode, name, *c, f"coverage_3sigma_{axis}_detected") for c in cells]
+                )
+                for axis in "xy"
+            ]
+            coverage.append(f"{100 * np.nanmean(axes):.2f}")
+            per_episode = [column(mode, name, *c, "nees_median_detected") for c in cells]
+            nees.append(f"{np.nanmedian(np.concatenate(per_episode)):.2f}")
+        what = "the default" if name == REFERENCE else ARMS[name][0]
+        lines.append(
+            f"| `{name}` | {what} | {' / '.join(rmse)} | {' / '.join(coverage)} | "
+            f"{' / '.join(nees)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--arms",
+        nargs="+",
+        default=list(ARMS),
+        choices=list(ARMS),
+        metavar="ARM",
+        help=f"default: all of {', '.join(ARMS)}",
+    )
+    parser.add_argument("--runs", type=int, default=100, help="episodes per cell")
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=ROOT / "results" / "ablations")
+    parser.add_argument("--report", type=Path, help="also write the tables to this file")
+    parser.add_argument("--workers", type=int, default=None, help="default: all cores")
+    parser.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    grids = path_grids(args.arms, args.runs, args.first_seed)
+    for mode, grid in grids.items():
+        done = run_sweep([grid], args.out, args.workers, progress=not args.no_progress)
+        print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
+        if done.failed:
+            raise SystemExit(f"{done.failed} runs failed, e.g. {done.errors[0]}")
+    episodes = {mode: stored_metrics(grid, args.out) for mode, grid in grids.items()}
+    command = "python scripts/ablations.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    text = (
+        f"# What each part of `{REFERENCE}` buys\n\nGenerated by `{command.strip()}` "
+        f"(dgpt-gym {dgpt_gym.__version__}; seeds {args.first_seed}-"
+        f"{args.first_seed + args.runs - 1}, paired by seed).\n\n" + report(episodes, args.arms)
+    )
+    print(text)
+    if args.report:
+        args.report.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
