@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
-from dgpt_gym.benchmark.sweep import Grid, run_sweep, stored_metrics  # noqa: E402
+from dgpt_gym.benchmark.sweep import Grid, sweep_metrics  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
 REFERENCE = "dgpt-rbcm"
@@ -185,12 +185,10 @@ def main(argv=None) -> None:
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     grids = path_grids(args.trackers, args.runs, args.first_seed)
+    episodes = {}
     for mode, grid in grids.items():
-        done = run_sweep([grid], args.out, args.workers, progress=not args.no_progress)
+        done, episodes[mode] = sweep_metrics(grid, args.out, args.workers, not args.no_progress)
         print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
-        if done.failed:
-            raise SystemExit(f"{done.failed} runs failed, e.g. {done.errors[0]}")
-    episodes = {mode: stored_metrics(grid, args.out) for mode, grid in grids.items()}
     text = report(episodes["fixed"], episodes["random"], args.trackers)
     command = "python scripts/random_paths.py " + " ".join(sys.argv[1:] if argv is None else argv)
     text = (

@@ -58,6 +58,7 @@ __all__ = [
     "verify_store",
     "sweep_units",
     "stored_metrics",
+    "sweep_metrics",
     "QUICK_SWEEP",
     "PAPER_SWEEP",
     "STANDARD_TRACKERS",
@@ -540,6 +541,18 @@ def stored_metrics(grid: Grid, out: str | Path) -> dict[tuple, list[dict]]:
             )
         metrics.setdefault(unit.cell, []).append(row["metrics"])
     return metrics
+
+
+def sweep_metrics(
+    grid: Grid, out: str | Path, workers: int | None = None, progress: bool = True
+) -> tuple[SweepReport, dict[tuple, list[dict]]]:
+    """Run ``grid`` (:func:`run_sweep`, resuming what the store at ``out`` holds) and return
+    what the run did and :func:`stored_metrics`; a RuntimeError, with the first failure, if
+    any run failed."""
+    done = run_sweep([grid], out, workers, progress=progress)
+    if done.failed:
+        raise RuntimeError(f"{done.failed} runs failed, e.g. {done.errors[0]}")
+    return done, stored_metrics(grid, out)
 
 
 def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict], list[dict]]:

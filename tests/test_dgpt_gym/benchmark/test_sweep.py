@@ -26,6 +26,7 @@ from dgpt_gym.benchmark.sweep import (
     run_sweep,
     stored_metrics,
     summarize_store,
+    sweep_metrics,
     sweep_units,
     verify_store,
 )
@@ -200,6 +201,10 @@ def test_a_failing_run_is_recorded_and_the_sweep_completes(tmp_path):
     assert (again.already_finished, again.ran, again.failed) == (2, 1, 1)
     with sqlite3.connect(tmp_path / DATABASE_NAME) as connection:
         assert connection.execute("SELECT COUNT(*) FROM runs").fetchone() == (3,)
+    with pytest.raises(ValueError, match=f"seed {FAILING_SEED} .* is failed"):
+        stored_metrics(grid, tmp_path)
+    with pytest.raises(RuntimeError, match="1 runs failed.*diverged on seed 1"):
+        sweep_metrics(grid, tmp_path, workers=1, progress=False)
 
 
 def test_grids_validate_their_arguments():
@@ -247,8 +252,8 @@ def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path)
     assert [unit.tracker for unit in grid.units()] == ["centroid"] * 2 + ["centroid/gate-10"] * 2
     with pytest.raises(ValueError, match="not stored"):
         stored_metrics(grid, tmp_path)
-    run_sweep([grid], tmp_path, workers=1, progress=False)
-    metrics = stored_metrics(grid, tmp_path)
+    done, metrics = sweep_metrics(grid, tmp_path, workers=1, progress=False)
+    assert (done.ran, done.already_finished) == (4, 0) and metrics == stored_metrics(grid, tmp_path)
     env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0)
     for seed in (0, 1):
         direct = run_episode(env, make_tracker("centroid", gate_radius=10.0), seed).metrics()
