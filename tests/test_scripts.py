@@ -700,19 +700,20 @@ def test_ablations_tables_by_hand():
     cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
     by_mode = {
         mode: {
-            **{(module.REFERENCE, *cell): episodes([3.0, 4.0]) for cell in cells},
-            **{("gp", *cell): episodes([4.0, 6.0]) for cell in cells},
+            **{(module.REFERENCE, *cell): episodes([3.0, 4.0, 5.0]) for cell in cells},
+            **{("gp", *cell): episodes([4.0, 6.0, 14.0]) for cell in cells},
         }
         for mode in module.PATH_MODES
     }
     text = module.report(by_mode, ["gp"])
     rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| `gp`")]
     assert len(rows) == 3  # one per path mode and the summary
-    # gp - dgpt-rbcm: 1 and 2 m in every cell; over 8 equal cells 1.96 sqrt(8 x 0.25) / 8
-    assert rows[0][1] == f"+1.50 ± {stats.t.ppf(0.975, 1) * 0.5:.2f}"  # not bold: 6.35 wide
-    assert rows[0][-1] == "**+1.50 ± 0.35** |"
-    # RMS of 4 and 6; coverage (99 + 100) / 2; the median of 2 and 3
-    assert rows[2][2:] == ["5.10 / 5.10", "99.50 / 99.50", "2.50 / 2.50 |"]
+    # gp - dgpt-rbcm: 1, 2 and 9 m in every cell, mean 4, variance 19; not bold within a cell
+    assert rows[0][1] == f"+4.00 ± {stats.t.ppf(0.975, 2) * np.sqrt(19 / 3):.2f}"
+    # over 8 equal cells: 1.96 sqrt(8 x 19 / 3) / 8 = 1.74
+    assert rows[0][-1] == "**+4.00 ± 1.74** |"
+    # RMS of 4, 6, 14; coverage (99 + 100) / 2; the median (not the mean, 4) of 2, 3, 7
+    assert rows[2][2:] == ["9.09 / 9.09", "99.50 / 99.50", "3.00 / 3.00 |"]
 
 
 def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
