@@ -38,13 +38,13 @@ sys.path.insert(0, str(ROOT))
 import dgpt_gym  # noqa: E402
 from agents.state_space_dgpt import PROCESS_NOISE_BOUNDS  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
-from dgpt_gym.benchmark.sweep import Grid, Variant, sweep_metrics  # noqa: E402
+from dgpt_gym.benchmark.sweep import Grid, Variant, on_every_path_mode, sweep_metrics  # noqa: E402
+from dgpt_gym.env import TRAJECTORY_MODES  # noqa: E402
 
 REFERENCE = "dgpt-rbcm"
 SCENARIOS = ("S1", "S2", "S3", "S4")
 CLUTTER_RATES = (1.0, 5.0)
 NOISE_STD = 1.0
-PATH_MODES = ("fixed", "random")
 
 
 def _without(name: str, **overrides) -> Variant:
@@ -101,19 +101,15 @@ id or a :class:`~dgpt_gym.benchmark.sweep.Variant` of ``dgpt-rbcm``)."""
 def path_grids(arms, runs: int, first_seed: int) -> dict[str, Grid]:
     """``dgpt-rbcm`` and ``arms`` (names of :data:`ARMS`) on S1-S4 x clutter 1, 5 at
     sigma_z 1, by path mode."""
-    trackers = (REFERENCE, *(ARMS[name][1] for name in arms))
-    return {
-        mode: Grid(
-            trackers=trackers,
-            scenarios=SCENARIOS,
-            noise_levels=(NOISE_STD,),
-            clutter_rates=CLUTTER_RATES,
-            runs=runs,
-            first_seed=first_seed,
-            trajectory=mode,
-        )
-        for mode in PATH_MODES
-    }
+    grid = Grid(
+        trackers=(REFERENCE, *(ARMS[name][1] for name in arms)),
+        scenarios=SCENARIOS,
+        noise_levels=(NOISE_STD,),
+        clutter_rates=CLUTTER_RATES,
+        runs=runs,
+        first_seed=first_seed,
+    )
+    return on_every_path_mode(grid)
 
 
 def stratified_difference(differences: list[np.ndarray]) -> tuple[float, float]:
@@ -142,7 +138,7 @@ def report(episodes: dict[str, dict], arms) -> str:
         return np.array([run[key] for run in runs], float)
 
     lines = []
-    for mode in PATH_MODES:
+    for mode in TRAJECTORY_MODES:
         lines += [
             f"### {'Reference' if mode == 'fixed' else 'Random'} paths: episode RMSE minus "
             f"`{REFERENCE}`'s, m",
@@ -171,7 +167,7 @@ def report(episodes: dict[str, dict], arms) -> str:
     ]
     for name in (REFERENCE, *arms):
         rmse, coverage, nees = [], [], []
-        for mode in PATH_MODES:
+        for mode in TRAJECTORY_MODES:
             values = np.concatenate([column(mode, name, *c, "rmse_2d") for c in cells])
             rmse.append(f"{np.sqrt(np.mean(values**2)):.2f}")
             axes = [

@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
-from dgpt_gym.benchmark.sweep import Grid, sweep_metrics  # noqa: E402
+from dgpt_gym.benchmark.sweep import Grid, on_every_path_mode, sweep_metrics  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
 REFERENCE = "dgpt-rbcm"
@@ -54,18 +54,15 @@ RESAMPLES = 2000
 
 def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
     """The two grids, by path mode: ``trackers`` on S1-S4 x clutter 1, 5 at sigma_z 1."""
-    return {
-        mode: Grid(
-            trackers=tuple(trackers),
-            scenarios=SCENARIOS,
-            noise_levels=(NOISE_STD,),
-            clutter_rates=CLUTTER_RATES,
-            runs=runs,
-            first_seed=first_seed,
-            trajectory=mode,
-        )
-        for mode in ("fixed", "random")
-    }
+    grid = Grid(
+        trackers=tuple(trackers),
+        scenarios=SCENARIOS,
+        noise_levels=(NOISE_STD,),
+        clutter_rates=CLUTTER_RATES,
+        runs=runs,
+        first_seed=first_seed,
+    )
+    return on_every_path_mode(grid)
 
 
 def root_mean_square(values, axis=-1):

@@ -703,7 +703,7 @@ def test_ablations_tables_by_hand():
             **{(module.REFERENCE, *cell): episodes([3.0, 4.0, 5.0]) for cell in cells},
             **{("gp", *cell): episodes([4.0, 6.0, 14.0]) for cell in cells},
         }
-        for mode in module.PATH_MODES
+        for mode in module.TRAJECTORY_MODES
     }
     text = module.report(by_mode, ["gp"])
     rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| `gp`")]

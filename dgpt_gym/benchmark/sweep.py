@@ -18,7 +18,7 @@ import os
 import time
 from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import gymnasium as gym
@@ -59,6 +59,7 @@ __all__ = [
     "sweep_units",
     "stored_metrics",
     "sweep_metrics",
+    "on_every_path_mode",
     "QUICK_SWEEP",
     "PAPER_SWEEP",
     "STANDARD_TRACKERS",
@@ -541,6 +542,13 @@ def stored_metrics(grid: Grid, out: str | Path) -> dict[tuple, list[dict]]:
             )
         metrics.setdefault(unit.cell, []).append(row["metrics"])
     return metrics
+
+
+def on_every_path_mode(grid: Grid) -> dict[str, Grid]:
+    """``grid`` on the reference paths and on random ones (each of
+    :data:`~dgpt_gym.env.TRAJECTORY_MODES`, whatever ``grid``'s own), by mode: the same
+    cells and seeds, so that each mode's runs pair by seed across trackers."""
+    return {mode: replace(grid, trajectory=mode) for mode in TRAJECTORY_MODES}
 
 
 def sweep_metrics(

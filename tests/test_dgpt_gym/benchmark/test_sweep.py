@@ -23,6 +23,7 @@ from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore, run_key
 from dgpt_gym.benchmark.sweep import (
     Grid,
     Variant,
+    on_every_path_mode,
     run_sweep,
     stored_metrics,
     summarize_store,
@@ -241,6 +242,9 @@ def test_a_random_path_grid_runs_random_paths_and_keeps_the_fixed_grids_keys(tmp
     assert reference.metrics()["rmse_2d"] != direct["rmse_2d"]
     with pytest.raises(ValueError, match=r"share one trajectory.*\['fixed', 'random'\]"):
         summarize_store([Grid(**cell), Grid(**cell, trajectory="random")], tmp_path)
+    both = on_every_path_mode(Grid(**cell, trajectory="random"))
+    assert [unit.key for unit in both["fixed"].units()] == [fixed.key]
+    assert [unit.key for unit in both["random"].units()] == [random.key]
 
 
 def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path):
