@@ -11,8 +11,9 @@ Printed and written to ``--report`` (Markdown):
   interval adds the cells' variances of the mean: the cells are strata of equal size);
 - per arm over all cells of a path mode: the root mean square of the episodes' RMSE, the
   3-sigma coverage on steps where a sensor senses the target (mean of the axes over the
-  episodes; nominal 99.73 %) and the median over episodes of the median 2-D NEES there
-  (nominal 1.39).
+  episodes; nominal 99.73 %), the median over episodes of the median 2-D NEES there
+  (nominal 1.39) and the share of learning steps that left q on a bound (issue 12's
+  goal: at most 10 %).
 
 The runs go through the evaluation's results store (``--out``, resumable, each run stored
 as it finishes). ``--out results/paper`` reuses the runs that the ``--paper`` grid and
@@ -64,6 +65,11 @@ ARMS = {
         "q not learnt: held on its lower bound, 1e-4 m^2/s^3, where the learning ends on "
         "most of S1's steps",
         _without("q-floor", learn_process_noise=False, process_noise=PROCESS_NOISE_BOUNDS[0]),
+    ),
+    "dgpt-rbcm/recursive-learning": (
+        "q the maximum of the whole track's step evidences (forgotten over 50 steps) "
+        "instead of a Newton step on the last 4 steps' likelihood",
+        _without("recursive-learning", learning="recursive"),
     ),
     **{
         f"dgpt-rbcm/window-{window}": (
@@ -160,13 +166,15 @@ def report(episodes: dict[str, dict], arms) -> str:
         "",
         "Reference / random paths. RMSE: root mean square over the episodes of each "
         "episode's 2-D RMSE, m. Coverage: 3-sigma, mean of the axes over the episodes, % "
-        "(nominal 99.73). NEES: median over episodes of the median 2-D NEES (nominal 1.39).",
+        "(nominal 99.73). NEES: median over episodes of the median 2-D NEES (nominal 1.39). "
+        "On a bound: the learning steps that left q on a bound (either axis), mean over "
+        "the episodes, %; - where q is not learnt.",
         "",
-        "| arm | what it changes | RMSE | 3-sigma coverage | median NEES |",
-        "|---|---|---|---|---|",
+        "| arm | what it changes | RMSE | 3-sigma coverage | median NEES | on a bound |",
+        "|---|---|---|---|---|---|",
     ]
     for name in (REFERENCE, *arms):
-        rmse, coverage, nees = [], [], []
+        rmse, coverage, nees, bound = [], [], [], []
         for mode in TRAJECTORY_MODES:
             values = np.concatenate([column(mode, name, *c, "rmse_2d") for c in cells])
             rmse.append(f"{np.sqrt(np.mean(values**2)):.2f}")
@@ -179,10 +187,13 @@ def report(episodes: dict[str, dict], arms) -> str:
             coverage.append(f"{100 * np.nanmean(axes):.2f}")
             per_episode = [column(mode, name, *c, "nees_median_detected") for c in cells]
             nees.append(f"{np.nanmedian(np.concatenate(per_episode)):.2f}")
+            shares = np.concatenate([column(mode, name, *c, "share_at_bound") for c in cells])
+            learnt = np.isfinite(shares)  # NaN: no learning step in the episode
+            bound.append(f"{100 * np.mean(shares[learnt]):.0f}" if learnt.any() else "-")
         what = "the default" if name == REFERENCE else ARMS[name][0]
         lines.append(
             f"| `{name}` | {what} | {' / '.join(rmse)} | {' / '.join(coverage)} | "
-            f"{' / '.join(nees)} |"
+            f"{' / '.join(nees)} | {' / '.join(bound)} |"
         )
     return "\n".join(lines) + "\n"
 

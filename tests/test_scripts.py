@@ -686,22 +686,23 @@ def test_ablations_tables_by_hand():
     assert mean == pytest.approx(6.0)
     assert half == pytest.approx(stats.norm.ppf(0.975) * np.sqrt(2.0) / 2)
 
-    def episodes(rmse):
+    def episodes(rmse, shares=(0.2, np.nan, 0.5)):
         return [
             {
                 "rmse_2d": value,
                 "coverage_3sigma_x_detected": 0.99,
                 "coverage_3sigma_y_detected": 1.0,
                 "nees_median_detected": value / 2,
+                "share_at_bound": share,
             }
-            for value in rmse
+            for value, share in zip(rmse, shares)
         ]
 
     cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
     by_mode = {
         mode: {
             **{(module.REFERENCE, *cell): episodes([3.0, 4.0, 5.0]) for cell in cells},
-            **{("gp", *cell): episodes([4.0, 6.0, 14.0]) for cell in cells},
+            **{("gp", *cell): episodes([4.0, 6.0, 14.0], [np.nan] * 3) for cell in cells},
         }
         for mode in module.TRAJECTORY_MODES
     }
@@ -712,8 +713,12 @@ def test_ablations_tables_by_hand():
     assert rows[0][1] == f"+4.00 ± {stats.t.ppf(0.975, 2) * np.sqrt(19 / 3):.2f}"
     # over 8 equal cells: 1.96 sqrt(8 x 19 / 3) / 8 = 1.74
     assert rows[0][-1] == "**+4.00 ± 1.74** |"
-    # RMS of 4, 6, 14; coverage (99 + 100) / 2; the median (not the mean, 4) of 2, 3, 7
-    assert rows[2][2:] == ["9.09 / 9.09", "99.50 / 99.50", "3.00 / 3.00 |"]
+    # RMS of 4, 6, 14; coverage (99 + 100) / 2; the median (not the mean, 4) of 2, 3, 7;
+    # no learning step in any episode
+    assert rows[2][2:] == ["9.09 / 9.09", "99.50 / 99.50", "3.00 / 3.00", "- / - |"]
+    reference = next(line for line in text.splitlines() if line.startswith("| `dgpt-rbcm` |"))
+    # the share's mean over the episodes that learnt: (20 + 50) / 2, not over all three
+    assert reference.endswith("| 35 / 35 |")
 
 
 def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
