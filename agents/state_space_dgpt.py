@@ -466,9 +466,10 @@ and about the same accuracy (paired RMSE +0.02 +- 0.20 / -0.13 +- 0.12 m; 3-sigm
 on detected steps 99.73 / 99.82 % against 99.74 / 99.80 %), while q held on the bound was
 -0.07 +- 0.07 / -0.31 +- 0.21 m from the window's. The truth is q = 0.04 m^2/s^3 within S1's
 legs (:class:`dgpt_gym.scenarios.NearlyConstantVelocityScenario`), 0 between S2's and S3's
-turns; S4's motion is not NCV. The window's learning leaves the bound more often only because four steps' likelihood is
-too flat to say where q is (:data:`LEARNING_WINDOW`); a prior that keeps q off the bound
-moves it far from the truth (:data:`PROCESS_NOISE_PRIORS`)."""
+turns; S4's motion is not NCV. The window's learning leaves the bound more often only
+because four steps' likelihood is too flat to say where q is (:data:`LEARNING_WINDOW`); a
+prior that keeps q off the bound moves it far from the truth (:data:`PROCESS_NOISE_PRIORS`).
+docs/analysis.md, "Does more data identify q?", has the held-out figures."""
 
 LEARNING_MEMORY = 50.0
 """The recursive learning's memory, in steps with data: each step's evidence is forgotten by
@@ -1599,11 +1600,10 @@ class StateSpaceDGPT(TrackerBase):
         log_likelihood = hypotheses["log_likelihood"]  # (H, axis)
         evidence = np.empty((len(LEARNING_GRID), 2))
         for axis in range(2):
-            moved = np.broadcast_to(log_likelihood, (len(LEARNING_GRID),) + log_likelihood.shape)
-            moved = moved.copy()
+            moved = np.repeat(log_likelihood[None], len(LEARNING_GRID), axis=0)
             moved[:, ncv, axis] = trial[..., axis]
             evidence[:, axis] = np.logaddexp.reduce(log_priors + moved.sum(axis=-1), axis=-1)
-        if not np.all(np.isfinite(evidence)):  # q stays; no step of the scenarios has had one
+        if not np.all(np.isfinite(evidence)):  # q and the sums stay as they were
             return
         keep = 1.0 - 1.0 / self.learning_memory
         # less each step's largest value, which moves no maximum and keeps the sums small
