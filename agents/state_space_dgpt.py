@@ -474,7 +474,7 @@ docs/analysis.md, "Does more data identify q?", has the held-out figures."""
 LEARNING_MEMORY = 50.0
 """The recursive learning's memory, in steps with data: each step's evidence is forgotten by
 a factor 1 - 1/50 per step after it, a third of an episode of 150 steps, so that q can
-follow a change of motion within an episode."""
+follow a change of motion within an episode. Set before any run, not tuned."""
 
 LEARNING_GRID = np.geomspace(*PROCESS_NOISE_BOUNDS, 41)
 """The values of q (m^2/s^3) at which the recursive learning sums the steps' evidences:
