@@ -446,18 +446,23 @@ LEARNINGS = ("window", "recursive")
 """How q is learnt (step 5 of the module docstring). ``"window"``: one Newton step per step
 on the exact likelihood of the last C steps with data under the NCV mode with its manoeuvre
 component (the default). ``"recursive"``: the maximum of the tracker's own step
-evidences over its whole past, each step's forgotten by a factor 1 - 1 / ``learning_memory``
-(:data:`LEARNING_MEMORY`) per step after it. Each step with data evaluates its evidence (the
-full model's: the log of the hypotheses' summed weights, turn modes included) at every q of
-:data:`LEARNING_GRID`, adds it to the forgotten sums, and q is their maximum
+evidences over the episode so far (across a track's restarts, as q itself), each step's
+forgotten by a factor 1 - 1 / ``learning_memory`` (:data:`LEARNING_MEMORY`) per step after
+it. Each step with data (not a track's first, not a gap's end, whose predictions do not
+come from q) evaluates its evidence (the full model's: the log of the hypotheses' summed
+weights, turn modes included) at every q of :data:`LEARNING_GRID`, one axis at a time with
+the other's q as it was, adds it to the forgotten sums, and each axis's q is their maximum
 (:func:`grid_maximum`). Only the step's own prediction varies with q (the earlier
-posteriors are held at the q they used), a recursive prediction-error estimate: at the true
-q the innovations' variance equals the predicted one, so the estimate is consistent. No
-prior: a q at the grid's end is the likelihood's answer and counts as on a bound.
+posteriors are held at the q they used), a recursive prediction-error estimate, not the
+re-filtered likelihood of the whole episode: at the true q the innovations' variance
+equals the predicted one, so the estimate is consistent. No prior: a maximum on the grid's
+end point is the likelihood's answer and counts as on a bound (the window's learning counts
+q within 1e-6 of a bound in log q; here a maximum within half a grid step of an end, a
+factor 1.33, counts).
 
 Why it is not the default: it answers whether more data than four steps identifies q, and it
-does not. Under the default model (turn modes, the manoeuvre component) the whole track's
-likelihood puts q on its lower bound on most steps, since the turn modes and the manoeuvre
+does not. Under the default model (turn modes, the manoeuvre component) the whole episode's
+evidence puts q on its lower bound on most steps, since the turn modes and the manoeuvre
 component carry the motion: on training seeds 1000-1023 (``python scripts/ablations.py
 --first-seed 1000 --runs 24 --arms dgpt-rbcm/recursive-learning dgpt-rbcm/q-floor``; S1-S4,
 both path modes, clutter 1 and 5, RBCM) 85 / 87 % of its learning steps ended on the bound
@@ -984,7 +989,10 @@ class StateSpaceDGPT(TrackerBase):
         )
         if gap_evidence is not None:
             hypotheses["log_weight"] = log_priors + gap_evidence
-        elif self.learn_process_noise and self.learning == "recursive" and not self.new_track_:
+        learns = self.learn_process_noise and self.learning == "recursive"
+        # a gap end's predictions come from the gap's particles and the reporting region,
+        # not from q, and a new track's step has no prediction
+        if learns and gap_predictions is None and not self.new_track_:
             self._learn_recursive(hypotheses, log_priors, prior_means, prior_covs, modes, dt)
         log_weights = hypotheses["log_weight"]
         means = np.swapaxes(hypotheses["mean"], 0, 1)  # (axis, hypothesis, 2)

@@ -67,7 +67,7 @@ ARMS = {
         _without("q-floor", learn_process_noise=False, process_noise=PROCESS_NOISE_BOUNDS[0]),
     ),
     "dgpt-rbcm/recursive-learning": (
-        "q the maximum of the whole track's step evidences (forgotten over 50 steps) "
+        "q the maximum of the episode's step evidences so far (forgotten over 50 steps) "
         "instead of a Newton step on the last 4 steps' likelihood",
         _without("recursive-learning", learning="recursive"),
     ),
