@@ -686,7 +686,7 @@ def test_ablations_tables_by_hand():
     assert mean == pytest.approx(6.0)
     assert half == pytest.approx(stats.norm.ppf(0.975) * np.sqrt(2.0) / 2)
 
-    def episodes(rmse, shares=(0.2, np.nan, 0.5)):
+    def episodes(rmse, shares=(0.2, np.nan, 0.5), nrmse=((0.01, 0.01),) * 3):
         return [
             {
                 "rmse_2d": value,
@@ -694,8 +694,10 @@ def test_ablations_tables_by_hand():
                 "coverage_3sigma_y_detected": 1.0,
                 "nees_median_detected": value / 2,
                 "share_at_bound": share,
+                "nrmse_x": x,
+                "nrmse_y": y,
             }
-            for value, share in zip(rmse, shares)
+            for value, share, (x, y) in zip(rmse, shares, nrmse)
         ]
 
     cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
@@ -703,10 +705,20 @@ def test_ablations_tables_by_hand():
         mode: {
             **{(module.REFERENCE, *cell): episodes([3.0, 4.0, 5.0]) for cell in cells},
             **{("gp", *cell): episodes([4.0, 6.0, 14.0], [np.nan] * 3) for cell in cells},
+            **{
+                ("dgpt-rbcm/window-8", *cell): episodes(
+                    [3.0, 4.0, 5.0], nrmse=((0.01, 0.03), (0.02, 0.04), (0.06, 0.08))
+                )
+                for cell in cells
+            },
+            **{
+                ("dgpt-rbcm/window-2", *cell): episodes([3.0, 4.0, 5.0], nrmse=((0.02, 0.02),) * 3)
+                for cell in cells
+            },
         }
         for mode in module.TRAJECTORY_MODES
     }
-    text = module.report(by_mode, ["gp"])
+    text = module.report(by_mode, ["gp", "dgpt-rbcm/window-8", "dgpt-rbcm/window-2"])
     rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| `gp`")]
     assert len(rows) == 3  # one per path mode and the summary
     # gp - dgpt-rbcm: 1, 2 and 9 m in every cell, mean 4, variance 19; not bold within a cell
@@ -719,6 +731,16 @@ def test_ablations_tables_by_hand():
     reference = next(line for line in text.splitlines() if line.startswith("| `dgpt-rbcm` |"))
     # the share's mean over the episodes that learnt: (20 + 50) / 2, not over all three
     assert reference.endswith("| 35 / 35 |")
+    # NRMSE against the window, per path mode: the episodes' mean (not the median, 3) of the
+    # axes' mean, in % (window 8: 2, 3 and 7 %), the windows in order, the default's 4 too
+    lines = text.splitlines()
+    rows = [
+        f"| {w} | " + " | ".join([value] * 8) + " |"
+        for w, value in ((2, "2.00"), (4, "1.00"), (8, "4.00"))
+    ]
+    assert [lines.count(row) for row in rows] == [2, 2, 2]
+    assert lines.index(rows[0]) < lines.index(rows[1]) < lines.index(rows[2])
+    assert module.window_table(by_mode, ["gp"]) == []  # no window arm, no table
 
 
 def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
