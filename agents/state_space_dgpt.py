@@ -536,6 +536,11 @@ def grid_maximum(values: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.n
     of the three; a tie takes the first, so an inner best point is above the point before it
     and the parabola is strictly concave), or at the end of the grid when the best point is
     an end. Returns the maximum's x (...) and whether it is an end (...)."""
+    if len(grid) < 3 or np.shape(values)[0] != len(grid):
+        raise ValueError(
+            "grid_maximum needs a grid of at least 3 points and values of the same length "
+            f"on axis 0; got grid of {len(grid)} and values of shape {np.shape(values)}"
+        )
     best = np.argmax(values, axis=0)
     inner = np.clip(best, 1, len(grid) - 2)
     below = np.take_along_axis(values, (inner - 1)[None], axis=0)[0]

@@ -46,6 +46,7 @@ from agents.state_space_dgpt import (
     LEARNING_GRID,
     LOG_STEP,
     PROCESS_NOISE_BOUNDS,
+    TURN_MODES,
     StateSpaceDGPT,
     grid_maximum,
     newton_step,
@@ -1100,27 +1101,31 @@ def test_grid_maximum_is_the_vertex_of_a_sampled_parabola():
     maximum, on_edge = grid_maximum(values, grid)
     np.testing.assert_allclose(maximum, [0.3, -1.1, 2.0, -2.0, -2.0], atol=1e-12)
     np.testing.assert_array_equal(on_edge, [False, False, True, True, True])
+    with pytest.raises(ValueError, match="at least 3 points"):
+        grid_maximum(values[:2], grid[:2])
+    with pytest.raises(ValueError, match=r"shape \(9, 5\)"):
+        grid_maximum(values, grid[:-1])
 
 
-def dense_step_evidence(tracker, mixed, dt, summaries, noise_var, q_axis, q_value):
+def dense_step_evidence(tracker, ncv_base, dt, summaries, noise_var, q_axis, q_value):
     """log p(this step's summaries) (both axes, summed over the hypotheses of
     ``tracker.step_predictions_``) with the NCV mode's prediction on axis ``q_axis`` made
-    again at q = ``q_value`` from the IMM's mixed NCV posterior of the step (``mixed``, the
-    tracker's ``mixed_`` before the step; its two process-noise components,
-    ``ncv_predict``) and every other prediction as the tracker made it: dense Gaussians
+    again at q = ``q_value`` from ``ncv_base`` = (mean (2, 2), cov (2, 2, 2)), the state the
+    NCV mode predicts from (with turn modes the IMM's mixed NCV posterior, else the last
+    broadcast posterior), through ``ncv_predict`` under its two process-noise components,
+    and every other prediction as the tracker made it: dense Gaussians
     p 1 1^T + diag(noise_var) per hypothesis and axis."""
     log_priors, means, covs, modes = tracker.step_predictions_
-    _, mixed_means, mixed_covs, _ = mixed
-    manoeuvre = tracker.manoeuvre
-    intensities = [q_value, q_value + manoeuvre.intensity]
+    modes = np.zeros(len(log_priors), dtype=int) if modes is None else modes
+    intensities = [q_value, q_value + tracker.manoeuvre.intensity]
     terms = []
     for h, (log_prior, mode) in enumerate(zip(log_priors, modes)):
         total = log_prior
         for axis in range(2):
             mean, var = means[h, axis, 0], covs[h, axis, 0, 0]
             if mode == 0 and axis == q_axis:
-                _, cov = ncv_predict(mixed_means[0, axis], mixed_covs[0, axis], dt, intensities[h])
-                var = cov[0, 0]
+                base_mean, base_cov = ncv_base[0][axis], ncv_base[1][axis]
+                var = ncv_predict(base_mean, base_cov, dt, intensities[h])[1][0, 0]
             total += multivariate_normal.logpdf(
                 summaries[:, axis], np.full(len(summaries), mean), var + np.diag(noise_var)
             )
@@ -1128,21 +1133,28 @@ def dense_step_evidence(tracker, mixed, dt, summaries, noise_var, q_axis, q_valu
     return np.logaddexp.reduce(terms)
 
 
-def test_the_recursive_learning_sums_the_dense_step_evidences():
-    """Two sensors, one point each per step, the default model (turn modes, the manoeuvre
-    component), no association: after the first step with a prediction the learning's sums
+@pytest.mark.parametrize("turn_rates", [TURN_MODES["rates"], ()])
+def test_the_recursive_learning_sums_the_dense_step_evidences(turn_rates):
+    """Two sensors, one point each per step, the manoeuvre component, with and without the
+    turn modes, no association: after the first step with a prediction the learning's sums
     are that step's evidence at every q of LEARNING_GRID (less its largest), computed
     densely with the NCV predictions made again at that q; after the next step (2 s later)
     they are the first step's times 1 - 1 / memory plus the second's; q is their maximum."""
     spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0)), n_steps=5)
     memory = 4.0
-    tracker = StateSpaceDGPT(gating=False, learning="recursive", learning_memory=memory)
+    tracker = StateSpaceDGPT(
+        gating=False, turn_rates=turn_rates, learning="recursive", learning_memory=memory
+    )
     tracker.reset(spec)
     rng = np.random.default_rng(3)
     sums = np.zeros((len(LEARNING_GRID), 2))
     for t, dt in ((0, None), (1, 1.0), (3, 2.0)):
         points = np.array([[3.0 * t, 2.0 * t]] * 2) + rng.normal(size=(2, 2))
-        mixed = tracker.mixed_  # the IMM's mixing for this step, made after the last
+        # what the NCV mode will predict from: the IMM's mixing for this step (made after
+        # the last), or the last posterior
+        ncv_base = (tracker.mean_, tracker.cov_)
+        if turn_rates and tracker.mixed_ is not None:
+            ncv_base = (tracker.mixed_[1][0], tracker.mixed_[2][0])
         tracker.update(measurement_obs(t, points, [0, 1]))
         if t == 0:  # a new track: no learning
             np.testing.assert_array_equal(tracker.evidence_sums_, 0.0)
@@ -1152,7 +1164,7 @@ def test_the_recursive_learning_sums_the_dense_step_evidences():
         dense = np.array(
             [
                 [
-                    dense_step_evidence(tracker, mixed, dt, points, np.ones(2), axis, q)
+                    dense_step_evidence(tracker, ncv_base, dt, points, np.ones(2), axis, q)
                     for axis in range(2)
                 ]
                 for q in LEARNING_GRID
