@@ -718,6 +718,10 @@ def test_ablations_tables_by_hand():
         }
         for mode in module.TRAJECTORY_MODES
     }
+    # on the reference paths, S1 at clutter 5 learnt with q on a bound on 80 % of steps
+    by_mode["fixed"][("dgpt-rbcm/window-8", "S1", module.NOISE_STD, 5.0)] = episodes(
+        [3.0, 4.0, 5.0], (0.8,) * 3, ((0.01, 0.03), (0.02, 0.04), (0.06, 0.08))
+    )
     text = module.report(by_mode, ["gp", "dgpt-rbcm/window-8", "dgpt-rbcm/window-2"])
     rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| `gp`")]
     assert len(rows) == 3  # one per path mode and the summary
@@ -741,6 +745,15 @@ def test_ablations_tables_by_hand():
     assert [lines.count(row) for row in rows] == [2, 2, 2]
     assert lines.index(rows[0]) < lines.index(rows[1]) < lines.index(rows[2])
     assert module.window_table(by_mode, ["gp"]) == []  # no window arm, no table
+    # on a bound per scenario: the learning episodes' mean, both clutter rates pooled
+    # (20 and 50 % in each; S1's reference paths also 80, 80, 80 at clutter 5: 310 / 5),
+    # and no row for an arm that never learns
+    bounds = module.bound_table(by_mode, ["gp", "dgpt-rbcm/window-8"])
+    assert bounds[-2:] == [
+        "| `dgpt-rbcm` | " + " | ".join(["35 / 35"] * 4) + " |",
+        "| `dgpt-rbcm/window-8` | 62 / 35 | " + " | ".join(["35 / 35"] * 3) + " |",
+    ]
+    assert not any(line.startswith("| `gp`") for line in bounds)
 
 
 def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
