@@ -41,7 +41,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
-from agents.state_space_dgpt import LEARNING_WINDOW, PROCESS_NOISE_BOUNDS  # noqa: E402
+from agents.state_space_dgpt import (  # noqa: E402
+    LEARNING_MEMORY,
+    LEARNING_WINDOW,
+    PROCESS_NOISE_BOUNDS,
+)
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
 from dgpt_gym.benchmark.sweep import Grid, Variant, on_every_path_mode, sweep_metrics  # noqa: E402
 from dgpt_gym.env import TRAJECTORY_MODES  # noqa: E402
@@ -75,8 +79,9 @@ ARMS = {
         _without("q-floor", learn_process_noise=False, process_noise=PROCESS_NOISE_BOUNDS[0]),
     ),
     "dgpt-rbcm/recursive-learning": (
-        "q the maximum of the episode's step evidences so far (forgotten over 50 steps) "
-        "instead of a Newton step on the last 4 steps' likelihood",
+        "q the maximum of the episode's step evidences so far (forgotten over "
+        f"{LEARNING_MEMORY:g} steps) instead of a Newton step on the last {LEARNING_WINDOW} "
+        "steps' likelihood",
         _without("recursive-learning", learning="recursive"),
     ),
     **{
@@ -196,14 +201,21 @@ def report(episodes: dict[str, dict], arms) -> str:
             per_episode = [column(mode, name, *c, "nees_median_detected") for c in cells]
             nees.append(f"{np.nanmedian(np.concatenate(per_episode)):.2f}")
             shares = np.concatenate([column(mode, name, *c, "share_at_bound") for c in cells])
-            learnt = np.isfinite(shares)  # NaN: no learning step in the episode
-            bound.append(f"{100 * np.mean(shares[learnt]):.0f}" if learnt.any() else "-")
+            bound.append(_share_percent(shares))
         what = "the default" if name == REFERENCE else ARMS[name][0]
         lines.append(
             f"| `{name}` | {what} | {' / '.join(rmse)} | {' / '.join(coverage)} | "
             f"{' / '.join(nees)} | {' / '.join(bound)} |"
         )
     return "\n".join(lines + bound_table(episodes, arms) + window_table(episodes, arms)) + "\n"
+
+
+def _share_percent(shares) -> str:
+    """The mean of the episodes' shares of learning steps on a bound, in %, over the
+    episodes that learnt (a NaN share: no learning step); "-" when none did."""
+    shares = np.asarray(shares, float)
+    learnt = shares[np.isfinite(shares)]
+    return f"{100 * learnt.mean():.0f}" if learnt.size else "-"
 
 
 def bound_table(episodes: dict[str, dict], arms) -> list[str]:
@@ -226,16 +238,15 @@ def bound_table(episodes: dict[str, dict], arms) -> list[str]:
         for scenario in SCENARIOS:
             shares = []
             for mode in TRAJECTORY_MODES:
-                values = np.array(
-                    [
-                        run["share_at_bound"]
-                        for clutter in CLUTTER_RATES
-                        for run in episodes[mode][(name, scenario, NOISE_STD, clutter)]
-                    ],
-                    float,
+                shares.append(
+                    _share_percent(
+                        [
+                            run["share_at_bound"]
+                            for clutter in CLUTTER_RATES
+                            for run in episodes[mode][(name, scenario, NOISE_STD, clutter)]
+                        ]
+                    )
                 )
-                values = values[np.isfinite(values)]  # NaN: no learning step in the episode
-                shares.append(f"{100 * values.mean():.0f}" if values.size else "-")
             row.append(" / ".join(shares))
         if any(cell != "- / -" for cell in row):
             lines.append(f"| `{name}` | " + " | ".join(row) + " |")
