@@ -211,8 +211,10 @@ def gaussian_sums(
             has_target = has_target & ~ends
             # Within a sensor, the components with none of its points as the target's yet
             # are kept whatever their weight (they branch into its later points) and are
-            # not the reference of the pruning: they are dropped at its last point.
-            pending = valid & ~has_target
+            # not the reference of the pruning: they are dropped at its last point. There
+            # every valid component has one of the sensor's points as the target's, and all
+            # are pruned against their total before they enter the next sensor.
+            pending = valid & ~has_target & ~ends
         valid_log_weights = log_weights if valid is None else log_weights[valid]
         if count == 1:
             largest = np.array([np.max(valid_log_weights)])

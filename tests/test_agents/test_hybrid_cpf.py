@@ -945,6 +945,28 @@ def test_pruning_keeps_a_sensors_target_point_that_the_all_clutter_branch_outwei
     np.testing.assert_allclose(result.mean, [16.0, 0.0], atol=1e-6)
 
 
+def test_pruning_at_a_sensors_last_point_drops_what_falls_below_the_tolerance():
+    """Two sensors each report a point at the prior mean and one 40 m off (prior N(0, 100 I),
+    sigma_z 1). Of the subsets with a target point from each sensor, two matter: both points
+    at 0 (A) and both at 40 (B), B's weight relative to A's the ratio of their sequential
+    predictive densities (the clutter factors are the same). Every subset that takes both
+    a 0 and a 40 point is e^-400 below them and must be pruned once a sensor's points are
+    all processed, not carried into the next sensor: two components remain, and the
+    posterior mean is the A-B mixture's."""
+    from scipy.stats import norm
+
+    points = np.array([[0.0, 0.0], [40.0, 0.0], [0.0, 0.0], [40.0, 0.0]])
+    result = exact_posterior(
+        np.zeros(2), np.full(2, 100.0), points, LIKELIHOOD, sensors=np.array([3, 3, 8, 8])
+    )
+    assert result.n_components == 2
+    once = 100.0 / 101.0  # the variance after one point
+    ratio = norm.pdf(40.0, 0.0, np.sqrt(101.0)) * norm.pdf(40.0, 40.0 * once, np.sqrt(once + 1))
+    ratio /= norm.pdf(0.0, 0.0, np.sqrt(101.0)) * norm.pdf(0.0, 0.0, np.sqrt(once + 1))
+    mean_b = 80.0 / (1.0 / 100.0 + 2.0)  # the update with two points at 40, prior 100
+    np.testing.assert_allclose(result.mean, [ratio / (1.0 + ratio) * mean_b, 0.0], atol=1e-9)
+
+
 @pytest.mark.parametrize("prior_model", ["moments", "mixture"])
 def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior(prior_model):
     """After every step whose Poisson update ran, the wrapped NCV tracker's broadcast state
