@@ -43,11 +43,14 @@ the reporting discs' y extent)."""
 class GaussianSumPosterior:
     """Moments of the exact posterior and what the pruning dropped.
 
-    ``pruned_mass`` bounds the total variation between the returned and the exact posterior
-    mixture (relative weight of the dropped components). ``log_evidence`` is the log of the
-    prior's integral against the likelihood, int N(x; mu, diag(P)) prod_j (c + lambda_T
-    N(z_j; x, sigma_z^2 I)) dx (per-sensor model: its factors), less the pruned
-    components' share: what weighs one prior against another (:func:`mixture_posterior`).
+    ``pruned_mass`` estimates the total variation between the returned and the exact
+    posterior mixture: the dropped components' weights, each relative to its prior's total
+    when it was dropped. It is not a bound: the pruning is sequential, and a component
+    dropped at one measurement is not restored when later ones favour it.
+    ``log_evidence`` is the log of the prior's integral against the likelihood,
+    int N(x; mu, diag(P)) prod_j (c + lambda_T N(z_j; x, sigma_z^2 I)) dx (per-sensor
+    model: its factors), less the pruned components' share: what weighs one prior against
+    another (:func:`mixture_posterior`).
     From :func:`gaussian_sums` every field has a leading axis, one entry per prior."""
 
     mean: np.ndarray
@@ -71,22 +74,28 @@ def exact_posterior(
 
     Expanding the product, every subset S of target-originated measurements contributes a
     Gaussian component (a Kalman update of the prior with the measurements in S) with weight
-    c^(n - |S|) lambda_T^|S| N(z_S; ...). Measurements whose target branch is below
-    ``prune_tolerance`` of the clutter branch under the prior predictive are skipped first
-    (their branch ratios are added to ``pruned_mass``). The components are built one measurement at a time,
+    c^(n - |S|) lambda_T^|S| N(z_S; ...). A measurement whose target branches hold less
+    than ``prune_tolerance`` of the prior's mass under its predictive (r / (1 + r), r the
+    ratio of the target branch to the clutter branch) is skipped first as clutter (its
+    share is added to ``pruned_mass``). The components are built one measurement at a time,
     each splitting into "clutter" (weight x c) and "target" (Kalman update, weight x
     lambda_T x predictive density); after each measurement, components below
     ``prune_tolerance`` of the total weight are dropped (and at most ``max_components``
     kept), their mass accumulated in ``pruned_mass``. The posterior mean and per-axis
-    variance are the moments of the final mixture.
+    variance are the moments of the final mixture. The pruning is sequential: a point far
+    from the prior whose evidence is decisive only together with later points (a prior far
+    from the target) can be lost, which ``pruned_mass`` does not show.
 
     ``sensors`` (n,), the reporting sensor of each measurement, gives the environment's
     model (Sec. VI-A) instead of eq. (42)'s: a sensor reports only when it senses the target,
     and then at least one target point (a zero-truncated Poisson count), so each sensor's
     factor is prod_(j in i) (c + lambda_T N_j) - c^(n_i) and only the subsets S with a
-    target point from every reporting sensor remain. The pre-gate then keeps every
-    measurement of a sensor none of whose measurements passes it. ``region`` adds the
-    likelihood of which sensors report (:func:`gaussian_sums`).
+    target point from every reporting sensor remain. The pre-gate's share is then of the
+    sensor's factor, which has no all-clutter branch, so a sensor's likeliest point is never
+    skipped. Within a sensor, the components with none of its points as the target's yet are
+    exempt from the pruning and the cap (its later points need them); at its last point
+    every component is pruned and capped. ``region`` adds the likelihood of which sensors
+    report (:func:`gaussian_sums`).
     """
     result = gaussian_sums(
         np.asarray(prior_mean, dtype=float)[None, :],
@@ -161,11 +170,21 @@ def gaussian_sums(
                 axis=-1,
             )
         )
-        skipped = log_ratio < (np.log(prune_tolerance) if prune_tolerance > 0 else -np.inf)
-        if sensors is not None:  # a sensor's target point is among its measurements
-            for row in skipped:
-                row &= np.isin(groups, groups[~row])
-        pruned = np.sum(np.where(skipped, np.exp(log_ratio), 0.0), axis=1)
+        # eq. (42): each point's factor is c (1 + r_j), and its target branches hold the
+        # share r_j / (1 + r_j) of the prior's mass
+        log_share = log_ratio - np.logaddexp(0.0, log_ratio)
+        if sensors is not None:
+            # the per-sensor model has no branch in which all of a sensor's points are
+            # clutter: the sensor's factor is c^n (prod_k (1 + r_k) - 1), of which z_j's
+            # target branches hold r_j / (1 + r_j) / (1 - 1 / prod_k (1 + r_k)). A sensor's
+            # likeliest point holds at least about 1 / n of it, so it is never skipped.
+            _, sensor_index = np.unique(groups, return_inverse=True)
+            one_hot = sensor_index[:, None] == np.arange(sensor_index.max() + 1)
+            log_products = (np.logaddexp(0.0, log_ratio) @ one_hot)[:, sensor_index]
+            with np.errstate(divide="ignore"):  # a product of 1 (every r_k underflows): keep
+                log_share = log_share - np.log(-np.expm1(-log_products))
+        skipped = log_share < (np.log(prune_tolerance) if prune_tolerance > 0 else -np.inf)
+        pruned = np.sum(np.where(skipped, np.exp(log_share), 0.0), axis=1)
         log_scale += skipped.sum(axis=1) * log_clutter
         everywhere = skipped.all(axis=0)
         measurements, groups, skipped = (
@@ -240,13 +259,16 @@ def gaussian_sums(
                 total,
             )
             keep = valid & ((weights >= prune_tolerance * reference[owner]) | pending)
-        if np.count_nonzero(keep) > max_components:
-            for prior in np.flatnonzero(np.bincount(owner[keep], minlength=count) > max_components):
-                own = keep & (owner == prior)
-                threshold = np.sort(weights[own])[-max_components]
-                keep &= (owner != prior) | (weights >= threshold)
-                if pending is not None:
-                    keep |= pending & (owner == prior)
+        # the cap: a prior's heaviest max_components of the components it may drop (the
+        # pending ones excepted, which its later points need)
+        capped = keep if pending is None else keep & ~pending
+        if np.count_nonzero(capped) > max_components:
+            for prior in np.flatnonzero(
+                np.bincount(owner[capped], minlength=count) > max_components
+            ):
+                own = np.flatnonzero(capped & (owner == prior))
+                lightest = np.argsort(weights[own], kind="stable")[:-max_components]
+                keep[own[lightest]] = False
         dropped = np.bincount(owner, np.where(keep, 0.0, weights), minlength=count)
         pruned = pruned + (1.0 - pruned) * dropped / np.where(total > 0, total, 1.0)
         means, variances, log_weights = means[keep], variances[keep], log_weights[keep]

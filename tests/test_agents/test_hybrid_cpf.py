@@ -967,6 +967,56 @@ def test_pruning_at_a_sensors_last_point_drops_what_falls_below_the_tolerance():
     np.testing.assert_allclose(result.mean, [ratio / (1.0 + ratio) * mean_b, 0.0], atol=1e-9)
 
 
+def test_the_per_sensor_pre_gate_weighs_a_point_against_the_sensors_other_points():
+    """One sensor reports two points about 9.6 sigma from the prior N(0, I), each with a
+    target-to-clutter ratio near 1e-9. Under the per-sensor model one of them is the
+    target's, so neither is negligible: against each other they are near even. Compared
+    with a clutter branch the model does not have, one would be skipped and the posterior
+    forced onto the other. The exact posterior is the enumeration's."""
+    model = PoissonLikelihood(
+        clutter_rate=2.0, detection_rate=3.0, noise_std=1.0, sensing_area=100.0
+    )
+    prior_mean, prior_var = np.zeros(2), np.ones(2)
+    points = np.array([[9.65, 0.0], [0.0, 9.6]])
+    sensors = np.array([5, 5])
+    result = exact_posterior(prior_mean, prior_var, points, model, sensors=sensors)
+    mean, var, log_evidence = brute_force_posterior(
+        prior_mean, prior_var, points, model, sensors=sensors
+    )
+    np.testing.assert_allclose(result.mean, mean, rtol=1e-9)
+    np.testing.assert_allclose(result.var, var, rtol=1e-9)
+    np.testing.assert_allclose(result.log_evidence, log_evidence, rtol=1e-12)
+
+
+def test_the_cap_keeps_each_priors_heaviest_components_and_no_more():
+    """With max_components = 1, a sensor's points at 0.5 and 6 (prior N(0, 4 I), sigma_z 1)
+    leave the heavier target branch, the Kalman update with 0.5 (x: 0.5 x 4 / 5 = 0.4); the
+    cap must not prefer the branch still waiting for the sensor's later point. Four points
+    in exact ties on two sensors leave at most max_components = 2."""
+    model = PoissonLikelihood(
+        clutter_rate=20.0, detection_rate=3.0, noise_std=1.0, sensing_area=100.0
+    )
+    one = exact_posterior(
+        np.zeros(2),
+        np.full(2, 4.0),
+        np.array([[0.5, 0.0], [6.0, 0.0]]),
+        model,
+        max_components=1,
+        sensors=np.array([0, 0]),
+    )
+    assert one.n_components == 1
+    np.testing.assert_allclose(one.mean, [0.4, 0.0], rtol=1e-12)
+    ties = exact_posterior(
+        np.zeros(2),
+        np.full(2, 4.0),
+        np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]),
+        model,
+        max_components=2,
+        sensors=np.array([0, 0, 1, 1]),
+    )
+    assert ties.n_components == 2
+
+
 @pytest.mark.parametrize("prior_model", ["moments", "mixture"])
 def test_hybrid_ncv_broadcasts_its_prior_state_conditioned_on_the_posterior(prior_model):
     """After every step whose Poisson update ran, the wrapped NCV tracker's broadcast state
