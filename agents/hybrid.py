@@ -20,8 +20,11 @@ Two updates, per step:
   at least one target point, which removes every term in which all of a sensor's points are
   clutter; ``scan_model="eq42"`` is eq. (42) as printed. The sum is built measurement by
   measurement; components whose relative weight falls below ``prune_tolerance`` are
-  dropped and their total weight is returned, so the result is exact up to that reported
-  mass (measured against a fine 2-D grid in the tests). See :data:`SCAN_MODELS` and
+  dropped, at most 256 are kept per prior component, and the dropped weight is returned
+  (``pruned_mass_``, the largest of the episode): an estimate of what the pruning lost, not
+  a bound, since a component dropped at one measurement is not restored when later ones
+  favour it (checked against the enumeration of every subset and a fine 2-D grid in the
+  tests). See :data:`SCAN_MODELS` and
   :data:`REACQUIRE_RULES` for how the defaults were chosen. Around the state-space DGPT the
   prior is its prediction as it is, a Gaussian mixture over its IMM modes and process-noise
   components, each updated exactly and weighted by its evidence
