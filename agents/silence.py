@@ -268,12 +268,10 @@ def _normal_interval_moments(lower: np.ndarray, upper: np.ndarray):
     (finite, ``lower`` <= ``upper``, elementwise): Phi(b) - Phi(a), phi(a) - phi(b) and
     Phi(b) - Phi(a) + a phi(a) - b phi(b). The mass of an interval in the upper tail is
     taken as Phi(-a) - Phi(-b), which keeps its digits."""
-    upper_tail = lower > 0.0
-    mass = np.where(
-        upper_tail,
-        special.ndtr(-lower) - special.ndtr(-upper),
-        special.ndtr(upper) - special.ndtr(lower),
-    )
+    # in the upper tail the mass is Phi(-a) - Phi(-b) = -(Phi(-b) - Phi(-a)): reflecting the
+    # interval there gives both cases with one pair of Phi's, to the same bits
+    sign = np.where(lower > 0.0, -1.0, 1.0)
+    mass = sign * (special.ndtr(sign * upper) - special.ndtr(sign * lower))
     density_lower = np.exp(-0.5 * lower**2) / np.sqrt(2.0 * np.pi)
     density_upper = np.exp(-0.5 * upper**2) / np.sqrt(2.0 * np.pi)
     first = density_lower - density_upper
