@@ -968,8 +968,8 @@ def test_pruning_at_a_sensors_last_point_drops_what_falls_below_the_tolerance():
 
 
 def test_the_per_sensor_pre_gate_weighs_a_point_against_the_sensors_other_points():
-    """One sensor reports two points about 9.6 sigma from the prior N(0, I), each with a
-    target-to-clutter ratio near 1e-9. Under the per-sensor model one of them is the
+    """One sensor reports two points about 9.6 m from the prior N(0, I) (sigma_z 1: 6.8
+    predictive standard deviations), each with a target-to-clutter ratio near 1e-9. Under the per-sensor model one of them is the
     target's, so neither is negligible: against each other they are near even. Compared
     with a clutter branch the model does not have, one would be skipped and the posterior
     forced onto the other. The exact posterior is the enumeration's."""
