@@ -356,8 +356,9 @@ def region_truncation(
     sd = np.sqrt(variances)
     low, high = means - half_width * sd, means + half_width * sd
     silent_positions = _discs_reaching(low, high, silent_positions, sensing_range)
-    # A Gaussian sum can hold millions of components: both passes go in chunks whose
-    # temporaries (components x silent discs, then x rows) stay near REGION_CHUNK elements.
+    # Any number of components may come (a Gaussian sum holds up to 256 per prior, times
+    # the priors): both passes go in chunks whose temporaries (components x silent discs,
+    # then x rows) stay near REGION_CHUNK elements.
     # A box wholly in the region keeps its component (mass 1); one with no point in it
     # gives mass 0; only the rest need the rows.
     chunk = max(1, REGION_CHUNK // (len(silent_positions) + len(reporting_positions) + 1))
