@@ -988,6 +988,36 @@ def test_the_per_sensor_pre_gate_weighs_a_point_against_the_sensors_other_points
     np.testing.assert_allclose(result.log_evidence, log_evidence, rtol=1e-12)
 
 
+def test_the_pre_gate_adds_a_skipped_points_share_of_its_factor_to_the_pruned_mass():
+    """The pre-gate's shares by hand, prior N(0, I), sigma_z 1 (predictive N(0, 2 I)),
+    r = lambda_T N(z; 0, 2 I) / c. Under eq. (42) a point's factor is c (1 + r), and its
+    target branch holds r / (1 + r): a lone point with r = 0.05 at tolerance 0.1 is skipped
+    and that is the pruned mass. Under the per-sensor model a sensor's factor is
+    c^n (prod (1 + r_k) - 1): beside a point at the prior's mean (r = 125), a point 12 m
+    off holds r / (1 + r) / (1 - 1 / ((1 + r_near) (1 + r))) of it, 1 / 125 more than
+    r / (1 + r), and nothing else is dropped."""
+    from scipy.stats import multivariate_normal
+
+    clutter = LIKELIHOOD.clutter_rate / LIKELIHOOD.sensing_area
+
+    def ratio(z):
+        return multivariate_normal.pdf(z, np.zeros(2), 2.0 * np.eye(2)) / clutter
+
+    lone = np.array([[np.sqrt(-4.0 * np.log(0.05 * clutter * 4.0 * np.pi)), 0.0]])
+    r = ratio(lone[0])
+    np.testing.assert_allclose(r, 0.05, rtol=1e-12)
+    result = exact_posterior(np.zeros(2), np.ones(2), lone, LIKELIHOOD, prune_tolerance=0.1)
+    np.testing.assert_allclose(result.pruned_mass, r / (1.0 + r), rtol=1e-12)
+    np.testing.assert_array_equal(result.mean, [0.0, 0.0])
+
+    points = np.array([[0.0, 0.0], [12.0, 0.0]])
+    near, far = ratio(points[0]), ratio(points[1])
+    result = exact_posterior(np.zeros(2), np.ones(2), points, LIKELIHOOD, sensors=np.array([4, 4]))
+    share = far / (1.0 + far) / (1.0 - 1.0 / ((1.0 + near) * (1.0 + far)))
+    np.testing.assert_allclose(result.pruned_mass, share, rtol=1e-9)
+    assert result.n_components == 1
+
+
 def test_the_cap_keeps_each_priors_heaviest_components_and_no_more():
     """With max_components = 1, a sensor's points at 0.5 and 6 (prior N(0, 4 I), sigma_z 1)
     leave the heavier target branch, the Kalman update with 0.5 (x: 0.5 x 4 / 5 = 0.4); the
