@@ -172,7 +172,8 @@ def gaussian_sums(
         )
         # eq. (42): each point's factor is c (1 + r_j), and its target branches hold the
         # share r_j / (1 + r_j) of the prior's mass
-        log_share = log_ratio - np.logaddexp(0.0, log_ratio)
+        log_factors = np.logaddexp(0.0, log_ratio)
+        log_share = log_ratio - log_factors
         if sensors is not None:
             # the per-sensor model has no branch in which all of a sensor's points are
             # clutter: the sensor's factor is c^n (prod_k (1 + r_k) - 1), of which z_j's
@@ -180,7 +181,7 @@ def gaussian_sums(
             # likeliest point holds at least about 1 / n of it, so it is never skipped.
             _, sensor_index = np.unique(groups, return_inverse=True)
             one_hot = sensor_index[:, None] == np.arange(sensor_index.max() + 1)
-            log_products = (np.logaddexp(0.0, log_ratio) @ one_hot)[:, sensor_index]
+            log_products = (log_factors @ one_hot)[:, sensor_index]
             with np.errstate(divide="ignore"):  # a product of 1 (every r_k underflows): keep
                 log_share = log_share - np.log(-np.expm1(-log_products))
         skipped = log_share < (np.log(prune_tolerance) if prune_tolerance > 0 else -np.inf)
