@@ -421,8 +421,13 @@ def _cut_to_region(
         sensing_range,
         area,
     )
-    pieces = _normal_interval_moments((starts - centre) / scale, (ends - centre) / scale)
-    rows = np.stack([piece.sum(axis=-1) for piece in pieces])  # (3, K, P): x mass, moments
+    # an empty piece (most of them: a silent chord that misses the row) adds exactly 0
+    wide = ends > starts
+    pieces = np.zeros((3,) + starts.shape)
+    pieces[:, wide] = _normal_interval_moments(
+        ((starts - centre) / scale)[wide], ((ends - centre) / scale)[wide]
+    )
+    rows = pieces.sum(axis=-1)  # (3, K, P): x mass, moments
     mass = np.sum(cells[0] * rows[0], axis=1)
     some = mass > 0
     safe = np.where(some, mass, 1.0)[:, None]
