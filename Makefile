@@ -24,8 +24,9 @@ $(VENV)/.dev: pyproject.toml | $(BIN)/python
 evaluate: $(VENV)/.core
 	$(BIN)/python scripts/evaluate.py
 
+# the suite spread over every core: its tests are independent and write only to tmp_path
 test: $(VENV)/.dev
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 bench: $(VENV)/.dev
 	$(BIN)/python scripts/bench.py
