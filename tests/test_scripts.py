@@ -32,13 +32,14 @@ def load_script(name):
     return module
 
 
-def run_script(name, *args, env=None):
+def run_script(name, *args, env=None, cwd=None):
     return subprocess.run(
         [sys.executable, str(ROOT / "scripts" / name), *args],
         capture_output=True,
         text=True,
         timeout=300,
         env=env,
+        cwd=cwd,
     )
 
 
@@ -150,13 +151,20 @@ def test_train_rl_trains_saves_and_compares(tmp_path):
     assert sorted(rows) == ["nearest 1", "nearest 2", "random", "trained agent"]
 
 
-def test_train_rl_rejects_bad_choices():
-    result = run_script("train_rl.py", "--env", "kalman")
+def test_train_rl_rejects_bad_choices(tmp_path):
+    """Each bad choice exits with code 2 and a message that names it, and writes nothing
+    (run from an empty folder, where the default output would go)."""
+    result = run_script("train_rl.py", "--env", "kalman", cwd=tmp_path)
     assert result.returncode == 2 and "window" in result.stderr
-    result = run_script("train_rl.py", "--env", "gating", "--algo", "dqn", "--timesteps", "8")
+    result = run_script(
+        "train_rl.py", "--env", "gating", "--algo", "dqn", "--timesteps", "8", cwd=tmp_path
+    )
     assert result.returncode == 2 and "Discrete" in result.stderr
-    result = run_script("train_rl.py", "--n-envs", "2", "--workers", "3", "--timesteps", "8")
+    result = run_script(
+        "train_rl.py", "--n-envs", "2", "--workers", "3", "--timesteps", "8", cwd=tmp_path
+    )
     assert result.returncode == 2 and "workers must be at most n_envs = 2" in result.stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 USER_TRACKER = """

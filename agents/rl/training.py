@@ -169,13 +169,13 @@ def train_agent(
     torch.set_num_threads(check_integer("torch_threads", torch_threads, low=1))
     threadpool_limits(limits=1)  # numpy's BLAS too: the trackers' matrices are tiny
     out = Path(out)
-    (out / "monitor").mkdir(parents=True, exist_ok=True)
     check_bool("normalize", normalize)
     env_seed = TRAINING_ENV_SEED + seed * n_envs
     if workers == 1:
         venv = stable_baselines_vec_env(env_id, n_envs, env_seed, env_kwargs)
-    else:
+    else:  # checks workers <= n_envs: nothing is written before the arguments are checked
         venv = process_blocks_vec_env(env_id, n_envs, env_seed, env_kwargs, workers)
+    (out / "monitor").mkdir(parents=True, exist_ok=True)
     venv = VecMonitor(venv, filename=str(out / "monitor" / "train"))
     if normalize:
         venv = VecNormalize(venv)
