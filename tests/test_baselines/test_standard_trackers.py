@@ -68,6 +68,32 @@ def test_every_tracker_stays_finite_with_noise_free_measurements(tracker_id):
     assert np.all(np.isfinite(result.mean)) and np.all(np.isfinite(result.var))
 
 
+UNUSUAL_SETTINGS = {
+    "sigma_z 8 at clutter 10": dict(scenario="S3", noise_std=8.0, clutter_rate=10.0),
+    "detection rate 0.2": dict(scenario="S2", detection_rate=0.2),
+    "40 sensors": dict(scenario="S4", n_sensors=40),
+    "20 m range, random path": dict(
+        scenario="S1", sensing_range=20.0, clutter_rate=5.0, trajectory="random"
+    ),
+    "dt 0.25, sigma_z 0.1": dict(scenario="S2", dt=0.25, noise_std=0.1),
+    "no clutter, 5 target points a step": dict(scenario="S3", clutter_rate=0.0, detection_rate=5.0),
+}
+
+
+@pytest.mark.filterwarnings("ignore:hybrid variant='paper' with detection_rate")
+@pytest.mark.parametrize("setting", UNUSUAL_SETTINGS)
+def test_every_tracker_stays_finite_in_unusual_settings(setting):
+    """Settings far from the paper's (long coverage gaps, heavy noise and clutter, few or
+    many points, short steps): every registered tracker answers every step with a finite
+    estimate and a finite, non-negative variance. (`hybrid-paper` warns, as designed, that
+    its eqs. (50)-(51) assume lambda_T = 1.)"""
+    for tracker_id in tracker_ids():
+        env = gym.make("DGPTrack-v0", **UNUSUAL_SETTINGS[setting])
+        result = run_episode(env, make_tracker(tracker_id), seed=7)
+        assert np.all(np.isfinite(result.mean)), tracker_id
+        assert np.all(np.isfinite(result.var)) and np.all(result.var >= 0.0), tracker_id
+
+
 def test_the_clairvoyant_singer_parameters_are_checked():
     with pytest.raises(ValueError, match="singer"):
         ClairvoyantFilter(singer="exact")
