@@ -264,3 +264,4 @@ def test_bad_train_rl_arguments(argv, name, tmp_path, capsys):
     assert _exit_code(train_rl_cli.main, [*base, *argv]) == 2
     error = capsys.readouterr().err
     assert name in error and "error:" in error and "Traceback" not in error
+    assert list(tmp_path.iterdir()) == []  # rejected before anything is written

@@ -170,18 +170,20 @@ def train_agent(
     threadpool_limits(limits=1)  # numpy's BLAS too: the trackers' matrices are tiny
     out = Path(out)
     check_bool("normalize", normalize)
+    algorithm = _algorithm_class(algo)
+    algo_kwargs = check_algo_kwargs(algorithm, algo_kwargs)
     env_seed = TRAINING_ENV_SEED + seed * n_envs
+    # the environments come last among the checks (process_blocks_vec_env checks workers):
+    # a rejected argument leaves no folder and no worker process behind
     if workers == 1:
         venv = stable_baselines_vec_env(env_id, n_envs, env_seed, env_kwargs)
-    else:  # checks workers <= n_envs: nothing is written before the arguments are checked
+    else:
         venv = process_blocks_vec_env(env_id, n_envs, env_seed, env_kwargs, workers)
     (out / "monitor").mkdir(parents=True, exist_ok=True)
     venv = VecMonitor(venv, filename=str(out / "monitor" / "train"))
     if normalize:
         venv = VecNormalize(venv)
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
-    algorithm = _algorithm_class(algo)
-    algo_kwargs = check_algo_kwargs(algorithm, algo_kwargs)
     try:
         model = algorithm(
             "MlpPolicy", venv, seed=seed, verbose=0, tensorboard_log=tensorboard, **algo_kwargs
