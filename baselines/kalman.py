@@ -31,7 +31,7 @@ Two association models for a scan of measurements with clutter:
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import spatial, stats
 
 __all__ = [
     "constant_velocity_model",
@@ -73,6 +73,86 @@ def kalman_predict(mean, cov, transition, process_noise):
 
 def _symmetric(matrix):
     return 0.5 * (matrix + np.swapaxes(matrix, -1, -2))
+
+
+def _det_2x2(matrix):
+    return matrix[..., 0, 0] * matrix[..., 1, 1] - matrix[..., 0, 1] * matrix[..., 1, 0]
+
+
+SPARSE_SUPPORT_MIN_POINTS = 64
+"""From this many measurements in a scan, :func:`multi_detection_update` finds the pairs
+that support each other with a KD-tree instead of forming all m^2 of them."""
+
+SUPPORT_LOG_RHO_CUTOFF = -50.0
+"""The sparse pairing drops the pairs with log rho_ji below this: each would add at most
+rho ~ 2e-22 to a log-support and a beta (the m^2 sum of them stays below rounding of the
+values they add to)."""
+
+
+def _pairwise_support(measurements, anchor_position, support_cov, log_rho_scale):
+    """Every anchor's support from every other measurement, all m^2 pairs formed.
+
+    With log rho_ji = ``log_rho_scale`` - (z_i - p_j)^T S^-1 (z_i - p_j) / 2 for the anchor
+    positions p_j (..., m, 2) and the support covariance S (..., 2, 2), returns per anchor
+    the log-support sum_{i != j} log(1 + rho_ji), the expected number of other target
+    measurements t_j = sum_{i != j} beta_ji and the weighted sum sum_{i != j} beta_ji z_i,
+    with beta_ji = rho_ji / (1 + rho_ji).
+    """
+    m = measurements.shape[0]
+    dx = measurements[:, 0] - anchor_position[..., :, None, 0]  # (..., m_anchor, m)
+    dy = measurements[:, 1] - anchor_position[..., :, None, 1]
+    a, b, d = (support_cov[..., i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    quad = (d * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * d - b * b)
+    log_rho = log_rho_scale[..., None, None] - 0.5 * quad
+    log_one_plus = np.logaddexp(0.0, log_rho)
+    log_one_plus[..., np.arange(m), np.arange(m)] = 0.0  # an anchor does not support itself
+    beta = np.exp(log_rho - log_one_plus)
+    beta[..., np.arange(m), np.arange(m)] = 0.0
+    return log_one_plus.sum(axis=-1), beta.sum(axis=-1), beta @ measurements
+
+
+def _pairwise_support_sparse(measurements, anchor_position, support_cov, log_rho_scale):
+    """:func:`_pairwise_support` from the pairs with log rho_ji above
+    :data:`SUPPORT_LOG_RHO_CUTOFF` only, found with a KD-tree in coordinates whitened by S.
+
+    S <= 2 R in the position block (the anchor's update with R bounds H P_a H^T by R), so
+    the radius is a few sigma_z and the pairs grow with the local density of the scan, not
+    with m^2: a scan of clutter at every sensor of a large network stays cheap.
+    """
+    m = measurements.shape[0]
+    batch = anchor_position.shape[:-2]
+    flat_positions = anchor_position.reshape(-1, m, 2)
+    flat_support = np.broadcast_to(support_cov, batch + (2, 2)).reshape(-1, 2, 2)
+    flat_scale = np.broadcast_to(log_rho_scale, batch).reshape(-1)
+    log_support = np.zeros(flat_positions.shape[:2])
+    expected_others = np.zeros(flat_positions.shape[:2])
+    weighted_sum = np.zeros(flat_positions.shape)
+    for k, (positions, cov, scale) in enumerate(zip(flat_positions, flat_support, flat_scale)):
+        squared_radius = 2.0 * (scale - SUPPORT_LOG_RHO_CUTOFF)
+        if squared_radius <= 0.0:
+            continue
+        # whiten: with S = L L^T, (z - p)^T S^-1 (z - p) = |L^-1 z - L^-1 p|^2
+        whiten = np.linalg.inv(np.linalg.cholesky(cov)).T
+        pairs = spatial.KDTree(positions @ whiten).sparse_distance_matrix(
+            spatial.KDTree(measurements @ whiten), np.sqrt(squared_radius), output_type="ndarray"
+        )
+        anchor, other = pairs["i"], pairs["j"]
+        keep = anchor != other  # an anchor does not support itself
+        anchor, other = anchor[keep], other[keep]
+        log_rho = scale - 0.5 * pairs["v"][keep] ** 2
+        log_one_plus = np.logaddexp(0.0, log_rho)
+        beta = np.exp(log_rho - log_one_plus)
+        log_support[k] = np.bincount(anchor, log_one_plus, minlength=m)
+        expected_others[k] = np.bincount(anchor, beta, minlength=m)
+        for axis in range(2):
+            weighted_sum[k, :, axis] = np.bincount(
+                anchor, beta * measurements[other, axis], minlength=m
+            )
+    return (
+        log_support.reshape(batch + (m,)),
+        expected_others.reshape(batch + (m,)),
+        weighted_sum.reshape(batch + (m, 2)),
+    )
 
 
 def inverse_2x2(matrix):
@@ -204,7 +284,11 @@ def multi_detection_update(
     e_j prod_{i != j} (1 + rho_ji). A missed-detection component (the prediction itself, weight
     ``miss_probability``, relative to P(some target measurement) = 1 - miss_probability)
     covers scans without a target measurement. Without clutter every measurement is the
-    target's: one Kalman update with their mean and R / m.
+    target's: one Kalman update with their mean and R / m. From
+    :data:`SPARSE_SUPPORT_MIN_POINTS` measurements on, the pairs (j, i) are found with a
+    KD-tree and those with rho_ji below exp(:data:`SUPPORT_LOG_RHO_CUTOFF`) are left out,
+    so a scan of m points costs O(m log m) rather than O(m^2) (clutter at every sensor of
+    a large network).
 
     Returns the posterior mean and covariance and the log-likelihood of the scan relative
     to the all-clutter hypothesis (the IMM mode likelihood): sum_j w_j / (1 + sum_i beta_ji),
@@ -241,33 +325,31 @@ def multi_detection_update(
     innovation = measurements - predicted[..., None, :]  # (..., m, 2)
     anchor_mean = mean[..., None, :] + np.einsum("...ik,...jk->...ji", gain, innovation)
     log_evidence = log_ratio_scale + gaussian_log_pdf(measurements, predicted, innovation_cov)
-    # support of every measurement i under anchor j: (..., m_anchor, m)
+    # support of every measurement i under anchor j
     anchor_cross = anchor_cov @ h.T
     support_cov = h @ anchor_cross + variance * eye  # the same for every anchor
     anchor_position = np.einsum("ij,...aj->...ai", h, anchor_mean)
-    dx = measurements[:, 0] - anchor_position[..., :, None, 0]  # (..., m_anchor, m)
-    dy = measurements[:, 1] - anchor_position[..., :, None, 1]
-    a, b, d = (support_cov[..., i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
-    support_det = a * d - b * b
-    quad = (d * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / support_det
-    log_rho = log_ratio_scale - np.log(2.0 * np.pi) - 0.5 * np.log(support_det) - 0.5 * quad
-    log_one_plus = np.logaddexp(0.0, log_rho)
-    log_one_plus[..., np.arange(m), np.arange(m)] = 0.0  # an anchor does not support itself
-    log_support = log_one_plus.sum(axis=-1)
-    beta = np.exp(log_rho - log_one_plus)
-    beta[..., np.arange(m), np.arange(m)] = 0.0
+    log_rho_scale = log_ratio_scale - np.log(2.0 * np.pi) - 0.5 * np.log(_det_2x2(support_cov))
+    pairwise = _pairwise_support_sparse if m >= SPARSE_SUPPORT_MIN_POINTS else _pairwise_support
+    log_support, expected_others, weighted_sum = pairwise(
+        measurements, anchor_position, support_cov, log_rho_scale
+    )
     # Refine each anchor with the beta-weighted other measurements: one update with their
-    # weighted mean and R / sum(beta) carries exactly their summed information. The anchors
-    # share P_a, so component j's covariance is P_a - P_a H^T S_j^-1 H P_a with
-    # S_j = H P_a H^T + R / total_j, and the mixture needs only sum_j w_j S_j^-1.
-    expected_others = beta.sum(axis=-1)  # (..., m): expected target points besides the anchor
-    total = np.maximum(expected_others, 1e-12)
-    weighted = (beta @ measurements) / total[..., None]
-    refine_inverse = inverse_2x2(
-        (support_cov - variance * eye)[..., None, :, :] + (variance / total)[..., None, None] * eye
-    )  # (..., m, 2, 2)
-    correction = np.einsum("...akl,...al->...ak", refine_inverse, weighted - anchor_position)
+    # weighted mean and R / t_j (t_j = sum_i beta_ji) carries exactly their summed
+    # information. The anchors share P_a, so with A = H P_a H^T component j's innovation
+    # covariance is S_j = A + R / t_j, and S_j^-1 = t_j (t_j A + R)^-1; written so, the
+    # refinement and its shrinkage vanish smoothly as t_j -> 0 (an anchor nothing supports).
+    anchor_only = support_cov - variance * eye  # A
+    scaled_inverse = inverse_2x2(
+        expected_others[..., None, None] * anchor_only[..., None, :, :] + variance * eye
+    )  # (t_j A + R)^-1, (..., m, 2, 2)
+    correction = np.einsum(
+        "...akl,...al->...ak",
+        scaled_inverse,
+        weighted_sum - expected_others[..., None] * anchor_position,
+    )
     refined_mean = anchor_mean + correction @ np.swapaxes(anchor_cross, -1, -2)
+    refine_inverse = expected_others[..., None, None] * scaled_inverse  # S_j^-1
     log_weights = log_evidence + log_support + np.log1p(-miss_probability)
     if miss_probability > 0.0:
         log_weights = np.concatenate(

@@ -5,6 +5,7 @@ import pytest
 from conftest import mixture_moments
 from scipy.stats import multivariate_normal
 
+from baselines import kalman
 from baselines.kalman import (
     POSITION_MATRIX,
     imm_mix,
@@ -78,8 +79,17 @@ def random_problem(rng, n_target=3, n_clutter=6):
     return mean, cov, rng.permutation(np.vstack([target, clutter]))
 
 
+@pytest.fixture(params=["all pairs", "KD-tree pairs"])
+def pairing(request, monkeypatch):
+    """Runs a test with both ways of finding the pairs of measurements that support each
+    other: every pair formed, or the KD-tree's sparse pairs (used for large scans)."""
+    threshold = 10**9 if request.param == "all pairs" else 0
+    monkeypatch.setattr(kalman, "SPARSE_SUPPORT_MIN_POINTS", threshold)
+    return request.param
+
+
 @pytest.mark.parametrize("miss_probability", [0.0, 0.14])
-def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_probability):
+def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_probability, pairing):
     rng = np.random.default_rng(3)
     for _ in range(5):
         mean, cov, measurements = random_problem(rng)
@@ -99,7 +109,7 @@ def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_proba
         np.testing.assert_allclose(got[2], expected[2], rtol=1e-10)
 
 
-def test_multi_detection_update_batches_over_modes_without_mixing_them():
+def test_multi_detection_update_batches_over_modes_without_mixing_them(pairing):
     rng = np.random.default_rng(4)
     mean, cov, measurements = random_problem(rng)
     means = np.stack([mean, mean + np.array([3.0, 1.0, -2.0, 0.5])])
@@ -140,6 +150,48 @@ def test_the_target_cluster_outweighs_isolated_clutter():
     )
     np.testing.assert_allclose(np.diag(target_only_cov)[[0, 2]], NOISE_STD**2 / 3, rtol=0.05)
     assert np.all(np.diag(new_cov)[[0, 2]] > np.diag(target_only_cov)[[0, 2]])
+
+
+def test_sparse_pairs_equal_all_pairs_on_a_scan_of_clutter_at_every_sensor(monkeypatch):
+    """A scan like clutter at every sensor of a large network: 600 points over 1 km^2 with
+    a few target points, two modes. The KD-tree drops only pairs with rho below 2e-22, so
+    the posterior and the likelihood agree with the all-pairs evaluation to rounding."""
+    rng = np.random.default_rng(8)
+    target = rng.normal([500.0, 500.0], NOISE_STD, (4, 2))
+    clutter = rng.uniform(0.0, 1000.0, (596, 2))
+    measurements = rng.permutation(np.vstack([target, clutter]))
+    means = np.array([[490.0, 5.0, 505.0, -3.0], [520.0, 0.0, 480.0, 0.0]])
+    covs = np.stack([np.diag([400.0, 25.0, 400.0, 25.0]), np.diag([1e4, 100.0, 1e4, 100.0])])
+    results = {}
+    for threshold in (10**9, 0):
+        monkeypatch.setattr(kalman, "SPARSE_SUPPORT_MIN_POINTS", threshold)
+        results[threshold] = multi_detection_update(
+            means, covs, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY, 0.05
+        )
+    for dense, sparse in zip(results[10**9], results[0]):
+        np.testing.assert_allclose(sparse, dense, rtol=1e-12, atol=1e-9)
+    # and the target cluster carries the posterior of the tight mode
+    np.testing.assert_allclose(results[0][0][0, [0, 2]], target.mean(axis=0), atol=0.1)
+
+
+def test_an_anchor_nothing_supports_keeps_its_own_kalman_update(pairing):
+    """Two measurements 1 km apart, 10 km from the origin, support each other with
+    rho ~ exp(-1e5): each anchor's component is its Kalman update, with no refinement (no
+    pull towards the origin from a refinement by nothing)."""
+    centre = np.array([1e4, 2e4])
+    mean = np.array([centre[0], 0.0, centre[1], 0.0])
+    cov = np.diag([1e6, 1.0, 1e6, 1.0])
+    measurements = centre + np.array([[-500.0, 0.0], [500.0, 0.0]])
+    new_mean, new_cov, _ = multi_detection_update(
+        mean, cov, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+    )
+    # equal evidence by symmetry: the mixture of the two anchor updates, weights 1/2
+    anchor_variance = 1e6 * NOISE_STD**2 / (1e6 + NOISE_STD**2)
+    anchor_offset = 500.0 * 1e6 / (1e6 + NOISE_STD**2)
+    np.testing.assert_allclose(new_mean[[0, 2]], centre, rtol=0, atol=1e-10)
+    # P - P (P + R)^-1 P with P = 1e6 loses about six digits to cancellation
+    np.testing.assert_allclose(new_cov[0, 0], anchor_variance + anchor_offset**2, rtol=1e-9)
+    np.testing.assert_allclose(new_cov[2, 2], anchor_variance, rtol=1e-9)
 
 
 def test_inverse_2x2_and_mixture_reduction_by_hand():
