@@ -75,21 +75,17 @@ def _symmetric(matrix):
     return 0.5 * (matrix + np.swapaxes(matrix, -1, -2))
 
 
-def _det_2x2(matrix):
-    return matrix[..., 0, 0] * matrix[..., 1, 1] - matrix[..., 0, 1] * matrix[..., 1, 0]
-
-
 SPARSE_SUPPORT_MIN_POINTS = 64
 """From this many measurements in a scan, :func:`multi_detection_update` finds the pairs
 that support each other with a KD-tree instead of forming all m^2 of them."""
 
 SUPPORT_LOG_RHO_CUTOFF = -50.0
 """The sparse pairing drops the pairs with log rho_ji below this: each would add at most
-rho ~ 2e-22 to a log-support and a beta (the m^2 sum of them stays below rounding of the
-values they add to)."""
+rho ~ 2e-22 to an anchor's log-support and expected count, so an anchor loses at most
+(m - 1) x 2e-22 of each, far below the rounding of the values they are added to."""
 
 
-def _pairwise_support(measurements, anchor_position, support_cov, log_rho_scale):
+def _pairwise_support_dense(measurements, anchor_position, support_cov, log_rho_scale):
     """Every anchor's support from every other measurement, all m^2 pairs formed.
 
     With log rho_ji = ``log_rho_scale`` - (z_i - p_j)^T S^-1 (z_i - p_j) / 2 for the anchor
@@ -112,12 +108,13 @@ def _pairwise_support(measurements, anchor_position, support_cov, log_rho_scale)
 
 
 def _pairwise_support_sparse(measurements, anchor_position, support_cov, log_rho_scale):
-    """:func:`_pairwise_support` from the pairs with log rho_ji above
+    """:func:`_pairwise_support_dense` from the pairs with log rho_ji above
     :data:`SUPPORT_LOG_RHO_CUTOFF` only, found with a KD-tree in coordinates whitened by S.
 
-    S <= 2 R in the position block (the anchor's update with R bounds H P_a H^T by R), so
-    the radius is a few sigma_z and the pairs grow with the local density of the scan, not
-    with m^2: a scan of clutter at every sensor of a large network stays cheap.
+    S <= 2 R (the anchor's update with R bounds H P_a H^T by R), so the radius does not
+    grow with the prior's spread: about 11-15 sigma_z at the paper's rates. The pairs then
+    grow with the scan's local density, not with m^2, and a scan of clutter at every sensor
+    of a large network stays cheap.
     """
     m = measurements.shape[0]
     batch = anchor_position.shape[:-2]
@@ -287,8 +284,8 @@ def multi_detection_update(
     target's: one Kalman update with their mean and R / m. From
     :data:`SPARSE_SUPPORT_MIN_POINTS` measurements on, the pairs (j, i) are found with a
     KD-tree and those with rho_ji below exp(:data:`SUPPORT_LOG_RHO_CUTOFF`) are left out,
-    so a scan of m points costs O(m log m) rather than O(m^2) (clutter at every sensor of
-    a large network).
+    so a scan of m points of bounded local density costs O(m log m) rather than O(m^2)
+    (clutter at every sensor of a large network).
 
     Returns the posterior mean and covariance and the log-likelihood of the scan relative
     to the all-clutter hypothesis (the IMM mode likelihood): sum_j w_j / (1 + sum_i beta_ji),
@@ -329,8 +326,11 @@ def multi_detection_update(
     anchor_cross = anchor_cov @ h.T
     support_cov = h @ anchor_cross + variance * eye  # the same for every anchor
     anchor_position = np.einsum("ij,...aj->...ai", h, anchor_mean)
-    log_rho_scale = log_ratio_scale - np.log(2.0 * np.pi) - 0.5 * np.log(_det_2x2(support_cov))
-    pairwise = _pairwise_support_sparse if m >= SPARSE_SUPPORT_MIN_POINTS else _pairwise_support
+    support_det = support_cov[..., 0, 0] * support_cov[..., 1, 1] - support_cov[..., 0, 1] ** 2
+    log_rho_scale = log_ratio_scale - np.log(2.0 * np.pi) - 0.5 * np.log(support_det)
+    # A non-finite state (which the dense sums carry along as NaN) would stop the KD-tree.
+    sparse = m >= SPARSE_SUPPORT_MIN_POINTS and np.all(np.isfinite(anchor_position))
+    pairwise = _pairwise_support_sparse if sparse else _pairwise_support_dense
     log_support, expected_others, weighted_sum = pairwise(
         measurements, anchor_position, support_cov, log_rho_scale
     )

@@ -396,8 +396,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{key}: {value:.3f}")
     if "clutter-all" in args.only:
         print(
-            f"\n## median step (ms) with clutter at every sensor, clutter rate 1, goal <= 3 for the GP trackers "
-            f"({args.clutter_all_episodes} episodes per cell, one at a time)"
+            "\n## median step (ms) with clutter at every sensor, clutter rate 1, goal <= 3 for "
+            f"the GP trackers ({args.clutter_all_episodes} episodes per cell, one at a time)"
         )
         print("\n".join(bench_clutter_all(args.clutter_all_episodes)))
     if "lockstep" in args.only:

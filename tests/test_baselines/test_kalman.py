@@ -1,5 +1,7 @@
 """baselines/kalman.py against dense, loop-by-loop references of the same formulas."""
 
+import itertools
+
 import numpy as np
 import pytest
 from conftest import mixture_moments
@@ -37,10 +39,10 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
         gain = cov @ H.T @ np.linalg.inv(innovation_cov)
         anchor_mean = mean + gain @ (anchor - H @ mean)
         anchor_cov = cov - gain @ H @ cov
-        log_weight = np.log(
-            DETECTION_RATE
-            * multivariate_normal(H @ mean, innovation_cov).pdf(anchor)
-            / CLUTTER_DENSITY
+        log_weight = (
+            np.log(DETECTION_RATE)
+            + multivariate_normal(H @ mean, innovation_cov).logpdf(anchor)
+            - np.log(CLUTTER_DENSITY)
         )
         support_cov = H @ anchor_cov @ H.T + R
         beta = np.zeros(len(measurements))
@@ -70,10 +72,17 @@ def anchored_mixture_by_loops(mean, cov, measurements, miss_probability=0.0):
     return mixture_mean, mixture_cov, np.logaddexp.reduce(weights - np.log(sizes))
 
 
-def random_problem(rng, n_target=3, n_clutter=6):
+TIGHT_CORRELATED_COV = np.array(
+    [[0.6, 0.2, 0.5, 0.0], [0.2, 4.0, 0.0, 1.0], [0.5, 0.0, 0.6, 0.1], [0.0, 1.0, 0.1, 4.0]]
+)
+"""A prior whose position block (correlation 0.83) makes the support covariance far from
+the isotropic 2 R, so that a wrong whitening shows."""
+
+
+def random_problem(rng, n_target=3, n_clutter=6, tight=False):
     mean = np.array([100.0, 5.0, 200.0, -3.0])
     factor = rng.normal(size=(4, 4))
-    cov = 4.0 * factor @ factor.T + np.eye(4)
+    cov = TIGHT_CORRELATED_COV if tight else 4.0 * factor @ factor.T + np.eye(4)
     target = rng.normal([100.0, 200.0], NOISE_STD, (n_target, 2))
     clutter = rng.uniform([60.0, 160.0], [140.0, 240.0], (n_clutter, 2))
     return mean, cov, rng.permutation(np.vstack([target, clutter]))
@@ -85,14 +94,15 @@ def pairing(request, monkeypatch):
     other: every pair formed, or the KD-tree's sparse pairs (used for large scans)."""
     threshold = 10**9 if request.param == "all pairs" else 0
     monkeypatch.setattr(kalman, "SPARSE_SUPPORT_MIN_POINTS", threshold)
-    return request.param
 
 
+@pytest.mark.usefixtures("pairing")
+@pytest.mark.parametrize("tight", [False, True], ids=["wide prior", "tight correlated prior"])
 @pytest.mark.parametrize("miss_probability", [0.0, 0.14])
-def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_probability, pairing):
+def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_probability, tight):
     rng = np.random.default_rng(3)
     for _ in range(5):
-        mean, cov, measurements = random_problem(rng)
+        mean, cov, measurements = random_problem(rng, tight=tight)
         got = multi_detection_update(
             mean,
             cov,
@@ -109,20 +119,62 @@ def test_multi_detection_update_equals_the_anchor_by_anchor_reference(miss_proba
         np.testing.assert_allclose(got[2], expected[2], rtol=1e-10)
 
 
-def test_multi_detection_update_batches_over_modes_without_mixing_them(pairing):
+@pytest.mark.usefixtures("pairing")
+def test_multi_detection_update_batches_over_modes_without_mixing_them():
     rng = np.random.default_rng(4)
     mean, cov, measurements = random_problem(rng)
-    means = np.stack([mean, mean + np.array([3.0, 1.0, -2.0, 0.5])])
-    covs = np.stack([cov, 2.0 * cov])
+    shifts = rng.normal(0.0, 2.0, (2, 3, 4))
+    means = mean + shifts  # (episodes, modes, state)
+    covs = np.stack([cov, 2.0 * cov, TIGHT_CORRELATED_COV])  # (modes, ...), broadcast
     batched = multi_detection_update(
         means, covs, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
     )
-    for k in range(2):
+    for e, k in np.ndindex(2, 3):
         alone = multi_detection_update(
-            means[k], covs[k], measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+            means[e, k], covs[k], measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+        )
+        for a, b in zip(batched, alone):
+            np.testing.assert_allclose(a[e, k], b, rtol=1e-12, atol=1e-12)
+    # one mean under several covariances
+    batched = multi_detection_update(
+        mean, covs, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+    )
+    for k in range(3):
+        alone = multi_detection_update(
+            mean, covs[k], measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
         )
         for a, b in zip(batched, alone):
             np.testing.assert_allclose(a[k], b, rtol=1e-12, atol=1e-12)
+
+
+def test_sparse_pairs_are_the_pairs_above_the_cutoff(monkeypatch):
+    """With the cutoff raised to log rho = -1 many pairs fall below it: the KD-tree's sums
+    equal sums over exactly the pairs at or above it, each found with an explicit inverse
+    of an anisotropic support covariance."""
+    monkeypatch.setattr(kalman, "SUPPORT_LOG_RHO_CUTOFF", -1.0)
+    rng = np.random.default_rng(9)
+    measurements = rng.uniform(0.0, 12.0, (40, 2))
+    anchors = measurements + rng.normal(0.0, 0.3, (2, 40, 2))  # two batch elements
+    support_covs = np.array([[[1.5, 0.6], [0.6, 1.1]], [[1.2, -0.3], [-0.3, 1.9]]])
+    log_rho_scales = np.array([1.2, 0.4])
+    got = kalman._pairwise_support_sparse(measurements, anchors, support_covs, log_rho_scales)
+    for k in range(2):
+        inverse = np.linalg.inv(support_covs[k])
+        log_support, expected, weighted, n_kept = np.zeros(40), np.zeros(40), np.zeros((40, 2)), 0
+        for j, i in itertools.permutations(range(40), 2):
+            offset = measurements[i] - anchors[k, j]
+            log_rho = log_rho_scales[k] - 0.5 * offset @ inverse @ offset
+            if log_rho < -1.0:
+                continue
+            n_kept += 1
+            rho = np.exp(log_rho)
+            log_support[j] += np.log1p(rho)
+            expected[j] += rho / (1.0 + rho)
+            weighted[j] += rho / (1.0 + rho) * measurements[i]
+        assert 0 < n_kept < 40 * 39 / 4  # the cutoff drops most pairs
+        np.testing.assert_allclose(got[0][k], log_support, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(got[1][k], expected, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(got[2][k], weighted, rtol=1e-12, atol=1e-13)
 
 
 def test_the_target_cluster_outweighs_isolated_clutter():
@@ -174,7 +226,8 @@ def test_sparse_pairs_equal_all_pairs_on_a_scan_of_clutter_at_every_sensor(monke
     np.testing.assert_allclose(results[0][0][0, [0, 2]], target.mean(axis=0), atol=0.1)
 
 
-def test_an_anchor_nothing_supports_keeps_its_own_kalman_update(pairing):
+@pytest.mark.usefixtures("pairing")
+def test_an_anchor_nothing_supports_keeps_its_own_kalman_update():
     """Two measurements 1 km apart, 10 km from the origin, support each other with
     rho ~ exp(-1e5): each anchor's component is its Kalman update, with no refinement (no
     pull towards the origin from a refinement by nothing)."""
@@ -192,6 +245,25 @@ def test_an_anchor_nothing_supports_keeps_its_own_kalman_update(pairing):
     # P - P (P + R)^-1 P with P = 1e6 loses about six digits to cancellation
     np.testing.assert_allclose(new_cov[0, 0], anchor_variance + anchor_offset**2, rtol=1e-9)
     np.testing.assert_allclose(new_cov[2, 2], anchor_variance, rtol=1e-9)
+
+
+def test_a_non_finite_prior_gives_the_same_answer_with_either_pairing(monkeypatch):
+    """A state gone non-finite upstream reaches the sums as NaN with every pair formed; the
+    KD-tree would raise on it, so the update falls back to the dense sums."""
+    rng = np.random.default_rng(10)
+    mean, cov, measurements = random_problem(rng)
+    mean[0] = np.nan
+    results = []
+    for threshold in (10**9, 0):
+        monkeypatch.setattr(kalman, "SPARSE_SUPPORT_MIN_POINTS", threshold)
+        with np.errstate(invalid="ignore"):
+            results.append(
+                multi_detection_update(
+                    mean, cov, measurements, H, NOISE_STD, DETECTION_RATE, CLUTTER_DENSITY
+                )
+            )
+    for dense, sparse in zip(*results):
+        np.testing.assert_array_equal(sparse, dense)
 
 
 def test_inverse_2x2_and_mixture_reduction_by_hand():
