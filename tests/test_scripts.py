@@ -472,6 +472,20 @@ def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
     )
 
 
+def test_compare_cells_prints_a_row_per_tracker_and_rejects_a_missing_file(tmp_path):
+    header = "tracker,scenario,noise_std,clutter_rate,rmse_2d,step_time_ms\n"
+    (tmp_path / "old.csv").write_text(header + "gp,S1,1.0,1.0,8.0,0.5\npda,S1,1.0,1.0,9.0,0.2\n")
+    (tmp_path / "new.csv").write_text(header + "gp,S1,1.0,1.0,8.0,0.9\npda,S1,1.0,1.0,9.9,0.2\n")
+    module = load_script("compare_cells")
+    result = run_script("compare_cells.py", str(tmp_path / "old.csv"), str(tmp_path / "new.csv"))
+    assert result.returncode == 0, result.stderr
+    assert "| `gp` | 1 | 1 of 1 | 0 | - | 0 / 0 |" in result.stdout
+    assert "| `pda` | 1 | 0 of 1 | 0.1 | S1, 1.0, 1.0, rmse_2d | 0 / 0 |" in result.stdout
+    with pytest.raises(SystemExit) as exit_info:
+        module.main([str(tmp_path / "missing.csv"), str(tmp_path / "new.csv")])
+    assert exit_info.value.code == 2
+
+
 def test_calibration_misses_tallies_by_hand():
     """scripts/calibration_misses.py's table on four hand-made steps: the share of axes
     outside 3 sigma and the median and mean of z_x^2 + z_y^2 per group."""
