@@ -39,6 +39,7 @@ def test_compare_cells_counts_and_locates_the_largest_change(tmp_path):
             "gp,S2,1.0,5.0,4.0,nan,0.7,0.23.2,",
             "pda,S1,1.0,1.0,9.0,3.0,0.2,0.23.2,",
             "pda,S3,1.0,1.0,5.0,3.0,0.2,0.23.2,",
+            "pda,S3,1.0,5.0,5.0,3.0,0.2,0.23.2,",  # two cells the new grid lacks
         ],
     )
     new = write(
@@ -63,12 +64,12 @@ def test_compare_cells_counts_and_locates_the_largest_change(tmp_path):
         "where": None,
     }
     assert rows["pda"]["cells"] == 1
-    assert (rows["pda"]["only_old"], rows["pda"]["only_new"]) == (1, 1)
+    assert (rows["pda"]["only_old"], rows["pda"]["only_new"]) == (2, 1)
     assert (rows["pda"]["values"], rows["pda"]["equal"]) == (3, 2)
     assert rows["pda"]["max_relative"] == pytest.approx(0.1, rel=1e-12)
     assert rows["pda"]["where"] == ("S1", "1.0", "1.0", "rmse_2d")
     table = comparison_markdown(list(rows.values()))
-    assert "| `pda` | 1 | 2 of 3 | 0.1 | S1, 1.0, 1.0, rmse_2d | 1 / 1 |" in table
+    assert "| `pda` | 1 | 2 of 3 | 0.1 | S1, 1.0, 1.0, rmse_2d | 2 / 1 |" in table
     assert "| `gp` | 2 | 6 of 6 | 0 | - | 0 / 0 |" in table
 
 
