@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.likelihood import PoissonLikelihood, measurement_chunks, squared_distances
+from agents.likelihood import PoissonLikelihood, nearest_squared_distance
 from agents.particles import resample_systematic
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.tracker import Estimate, TrackerBase
@@ -195,11 +195,7 @@ class MultipleModelCPF(TrackerBase):
         """True when no particle is within ``REACQUIRE_SIGMAS`` sigma_z of any measurement:
         the target left the cloud (an abrupt manoeuvre, a long gap) and no reweighting can
         bring it back."""
-        positions = self.particles_[:, [0, 2]]
-        closest = min(
-            squared_distances(positions, measurements[chunk]).min()
-            for chunk in measurement_chunks(len(positions), len(measurements))
-        )
+        closest = nearest_squared_distance(self.particles_[:, [0, 2]], measurements)
         return closest > (REACQUIRE_SIGMAS * self.spec_.model_noise_std) ** 2
 
     def _update(self, measurements: np.ndarray) -> None:

@@ -17,7 +17,8 @@
 - clutter-all: median step (ms) of the GP trackers (``dgpt-rbcm``, ``gp``, ``dgpt-gpoe``,
   ``hybrid``) with clutter at every sensor (``clutter_sensors="all"``, clutter rate 1), one
   episode at a time, in each scenario on its reference path and on random paths. Goal
-  <= 3 ms in every cell for the GP trackers (issue 12); the KF-PDA and IMM-PDA beside them.
+  <= 3 ms in every cell for the GP trackers (issue 12); the KF-PDA, IMM-PDA and CPF beside
+  them.
 - lockstep: seconds per episode of the GP trackers run one episode at a time
   (``run_episode``) and in a lockstep block (``run_episodes``, the sweep's way), on the same
   seeds, checking that the numbers are identical; the ratio is the sweep's speed-up.
@@ -175,7 +176,7 @@ def bench_ncv_step(episodes: int) -> dict:
     }
 
 
-CLUTTER_ALL_TRACKERS = ("dgpt-rbcm", "gp", "dgpt-gpoe", "hybrid", "pda", "imm-pda")
+CLUTTER_ALL_TRACKERS = ("dgpt-rbcm", "gp", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf")
 
 
 def bench_clutter_all(
