@@ -39,10 +39,11 @@ particles x measurements. Scans of the paper's grid fit in one chunk."""
 NEAR_PAIRS_MIN_MEASUREMENTS = 128
 """From this many measurements in a scan, :meth:`PoissonLikelihood.log_likelihood` (with
 clutter) and :func:`nearest_squared_distance` use only the position-measurement pairs a
-KD-tree finds near each other, instead of forming all of them. The near pairs are already
-the faster way from about 32 measurements against 2000 particles (docs/performance.md,
-"Large scans"); the dense way is kept below 128 because the paper's grid never reaches it
-(at most 76 points a scan), so the grid's CPF numbers do not depend on this change."""
+KD-tree finds near each other, instead of forming all of them. Against 2000 particles the
+near pairs are the faster way from about 16 measurements at sigma_z 1 and 64 at sigma_z 4
+(docs/performance.md, "Large scans in the CPF"); the dense way is kept below 128, which the
+paper's grid never reaches (at most 76 points a scan), so the grid's CPF numbers are those
+of the dense sums."""
 
 NEAR_LOG_RATIO_CUTOFF = -50.0
 """The near pairs of :meth:`PoissonLikelihood.log_likelihood` are those whose target term
@@ -157,8 +158,13 @@ class PoissonLikelihood:
         radius2 = 2.0 * variance * (log_peak_ratio - cutoff)
         if radius2 <= 0.0 or not measurements.shape[0]:  # no pair reaches the cutoff
             return total
-        pairs = KDTree(positions).sparse_distance_matrix(
-            KDTree(measurements), np.sqrt(radius2), output_type="ndarray"
-        )
-        terms = np.log1p(np.exp(log_peak_ratio - 0.5 * pairs["v"] ** 2 / variance))
-        return total + np.bincount(pairs["i"], terms, minlength=positions.shape[0])
+        tree = KDTree(positions)
+        # in chunks of measurements, as the dense sums: when every pair is near (a wide
+        # sigma_z, a dense scan) the pairs are as many as the dense array's entries
+        for chunk in measurement_chunks(positions.shape[0], measurements.shape[0]):
+            pairs = tree.sparse_distance_matrix(
+                KDTree(measurements[chunk]), np.sqrt(radius2), output_type="ndarray"
+            )
+            terms = np.log1p(np.exp(log_peak_ratio - 0.5 * pairs["v"] ** 2 / variance))
+            total += np.bincount(pairs["i"], terms, minlength=positions.shape[0])
+        return total

@@ -128,3 +128,18 @@ def test_the_nearest_pair_of_a_large_scan(rng, monkeypatch):
     assert dense == pytest.approx(
         ((positions[:, None, :] - measurements[None, :, :]) ** 2).sum(axis=2).min(), rel=1e-15
     )
+
+
+def test_the_near_pairs_are_summed_in_chunks_of_measurements(rng, monkeypatch):
+    """With every pair near, the near pairs are as many as the dense array's entries: they
+    are found chunk by chunk, and the sum is the one of a single chunk."""
+    model = PoissonLikelihood(5.0, 1.0, 4.0, np.pi * 50.0**2)
+    positions, measurements = scan(rng, 50, SCAN, spread=5.0)
+    whole = model.near_log_likelihood(positions, measurements)
+    monkeypatch.setattr(likelihood_module, "CHUNK_ELEMENTS", 50 * 16)  # 16 points a chunk
+    np.testing.assert_allclose(
+        model.near_log_likelihood(positions, measurements), whole, rtol=1e-14
+    )
+    np.testing.assert_allclose(
+        whole, dense_log_likelihood(model, positions, measurements), rtol=1e-13
+    )
