@@ -156,7 +156,7 @@ class PoissonLikelihood:
         log_peak_ratio = np.log(self.detection_rate / (2.0 * np.pi * variance)) - log_clutter
         total = np.full(positions.shape[0], measurements.shape[0] * log_clutter)
         radius2 = 2.0 * variance * (log_peak_ratio - cutoff)
-        if radius2 <= 0.0 or not measurements.shape[0]:  # no pair reaches the cutoff
+        if radius2 <= 0.0:  # no pair reaches the cutoff
             return total
         tree = KDTree(positions)
         # in chunks of measurements, as the dense sums: when every pair is near (a wide
