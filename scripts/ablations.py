@@ -35,7 +35,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -46,7 +45,11 @@ from agents.state_space_dgpt import (  # noqa: E402
     LEARNING_WINDOW,
     PROCESS_NOISE_BOUNDS,
 )
-from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
+from dgpt_gym.benchmark.episodes import (  # noqa: E402
+    interval_half_width,
+    signed_interval,
+    stratified_difference,
+)
 from dgpt_gym.benchmark.sweep import Grid, Variant, on_every_path_mode, sweep_metrics  # noqa: E402
 from dgpt_gym.env import TRAJECTORY_MODES  # noqa: E402
 
@@ -131,21 +134,6 @@ def path_grids(arms, runs: int, first_seed: int) -> dict[str, Grid]:
     return on_every_path_mode(grid)
 
 
-def stratified_difference(differences: list[np.ndarray]) -> tuple[float, float]:
-    """The mean over strata of equal weight of each stratum's mean paired difference, and
-    the half-width of its 95 % normal interval, 1.96 sqrt(sum_c s_c^2 / n_c) / C."""
-    means = [np.mean(values) for values in differences]
-    variances = [np.var(values, ddof=1) / len(values) for values in differences]
-    scale = stats.norm.ppf(0.975) * np.sqrt(np.sum(variances)) / len(differences)
-    return float(np.mean(means)), float(scale)
-
-
-def _signed(mean: float, half: float) -> str:
-    """``+m ± h``, bold when the interval excludes 0."""
-    bold = "**" if abs(mean) > half else ""
-    return f"{bold}{mean:+.2f} ± {half:.2f}{bold}"
-
-
 def report(episodes: dict[str, dict], arms) -> str:
     """The Markdown tables of the module docstring from each path mode's stored metrics
     (:func:`~dgpt_gym.benchmark.sweep.stored_metrics`, keyed by cell)."""
@@ -170,8 +158,8 @@ def report(episodes: dict[str, dict], arms) -> str:
                 column(mode, name, *cell, "rmse_2d") - column(mode, REFERENCE, *cell, "rmse_2d")
                 for cell in cells
             ]
-            row = [_signed(np.mean(d), interval_half_width(d)) for d in differences]
-            row.append(_signed(*stratified_difference(differences)))
+            row = [signed_interval(np.mean(d), interval_half_width(d)) for d in differences]
+            row.append(signed_interval(*stratified_difference(differences)))
             lines.append(f"| `{name}` | " + " | ".join(row) + " |")
         lines.append("")
     lines += [

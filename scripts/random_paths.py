@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
-from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
+from dgpt_gym.benchmark.episodes import interval_half_width, signed_interval  # noqa: E402
 from dgpt_gym.benchmark.sweep import Grid, on_every_path_mode, sweep_metrics  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
@@ -117,9 +117,9 @@ def report(fixed: dict, random: dict, trackers) -> str:
                 paired_cells.append("-")
             else:
                 difference = on_random - column(random, REFERENCE, scenario, clutter, "rmse_2d")
-                mean, half = np.mean(difference), interval_half_width(difference)
-                bold = "**" if abs(mean) > half else ""
-                paired_cells.append(f"{bold}{mean:+.2f} ± {half:.2f}{bold}")
+                paired_cells.append(
+                    signed_interval(np.mean(difference), interval_half_width(difference))
+                )
             coverage = [
                 100
                 * np.nanmean(

@@ -37,6 +37,8 @@ __all__ = [
     "add_floor_ratios",
     "format_summary_table",
     "interval_half_width",
+    "stratified_difference",
+    "signed_interval",
 ]
 
 
@@ -295,6 +297,23 @@ def interval_half_width(values) -> float:
         return float("nan")
     quantile = stats.t.ppf(0.975, values.size - 1)
     return float(quantile * np.std(values, ddof=1) / np.sqrt(values.size))
+
+
+def stratified_difference(differences: list[np.ndarray]) -> tuple[float, float]:
+    """The mean over strata of equal weight (cells) of each stratum's mean paired
+    difference, and the half-width of its 95 % normal interval,
+    1.96 sqrt(sum_c s_c^2 / n_c) / C."""
+    means = [np.mean(values) for values in differences]
+    variances = [np.var(values, ddof=1) / len(values) for values in differences]
+    scale = stats.norm.ppf(0.975) * np.sqrt(np.sum(variances)) / len(differences)
+    return float(np.mean(means)), float(scale)
+
+
+def signed_interval(mean: float, half: float, digits: int = 2) -> str:
+    """``+m ± h`` for a paired difference and its interval's half-width, bold when the
+    interval excludes 0."""
+    bold = "**" if abs(mean) > half else ""
+    return f"{bold}{mean:+.{digits}f} ± {half:.{digits}f}{bold}"
 
 
 def summarize_runs(rows: list[dict[str, float]]) -> dict[str, float]:
