@@ -699,6 +699,67 @@ def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
 
 
+def test_clutter_sweep_tables_by_hand():
+    """scripts/clutter_sweep.py's tables from hand-made episodes: the RMS over episodes, the
+    paired difference to dgpt-rbcm averaged over the four scenarios with its stratified
+    interval, and the calibration cell (mean and lowest scenario-axis, median NEES)."""
+    module = load_script("clutter_sweep")
+
+    def episodes(rmse, coverage_x=0.99, nees=1.5):
+        return [
+            {
+                "rmse_2d": value,
+                "coverage_3sigma_x_detected": coverage_x,
+                "coverage_3sigma_y_detected": 1.0,
+                "nees_median_detected": nees,
+            }
+            for value in rmse
+        ]
+
+    rates = [1.0, 20.0]
+    by_mode = {}
+    for mode in ("fixed", "random"):
+        cells = {}
+        for index, scenario in enumerate(module.SCENARIOS):
+            for rate in rates:
+                cell = (scenario, module.NOISE_STD, rate)
+                cells[("dgpt-rbcm", *cell)] = episodes([3.0, 4.0])
+                # differences to the reference: scenario k (0-3) gets k + 1 and k + 3
+                cells[("other", *cell)] = episodes(
+                    [4.0 + index, 7.0 + index], 0.98 - 0.01 * index, nees=2.0 + index**2
+                )
+        by_mode[mode] = cells
+    text = module.report(by_mode, ["dgpt-rbcm", "other"], rates)
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    assert "| S1 | `dgpt-rbcm` | 3.54 | 3.54 |" in rows  # RMS of 3 and 4
+    assert f"| S2 | `other` | {np.sqrt((25 + 64) / 2):.2f} | {np.sqrt((25 + 64) / 2):.2f} |" in rows
+    # per scenario the mean difference is k + 2 (mean 3.5 over k = 0-3), the variance of
+    # each mean 2 / 2; the stratified half-width 1.96 sqrt(4 x 1) / 4
+    half = stats.norm.ppf(0.975) * np.sqrt(4.0) / 4
+    paired = next(row for row in rows if row.startswith("| `other` | fixed | **"))
+    assert paired.split(" | ")[2] == f"**+3.50 ± {half:.2f}**"
+    # coverage: X 98, 97, 96, 95 % and Y 100 % in the four scenarios; NEES 2, 3, 6, 11
+    # (two episodes each): median 4.5, mean 5.5
+    calibration = [row for row in rows if row.startswith("| `other` | random | 9")]
+    assert calibration[0].split(" | ")[2] == f"{(98 + 97 + 96 + 95 + 400) / 8:.2f} (95.00), 4.50"
+
+
+def test_clutter_sweep_runs_resumes_and_draws(tmp_path):
+    args = ["--trackers", "dgpt-rbcm", "centroid", "--runs", "1", "--clutter-rates", "1", "8"]
+    args += ["--workers", "1", "--out", str(tmp_path), "--no-progress"]
+    args += ["--report", str(tmp_path / "report.md"), "--figure", str(tmp_path / "rmse.png")]
+    first = run_script("clutter_sweep.py", *args)
+    assert first.returncode == 0, first.stderr
+    # 2 trackers x 4 scenarios x 2 clutter rates x 1 seed in each mode
+    assert "fixed paths: 16 runs" in first.stdout and "random paths: 16 runs" in first.stdout
+    again = run_script("clutter_sweep.py", *args)
+    assert "random paths: 0 runs, 16 already stored" in again.stdout
+    report = (tmp_path / "report.md").read_text()
+    # 8 RMSE rows (4 scenarios x 2 modes), 2 paired and 2 calibration rows
+    assert report.count("| `centroid` |") == 12 and "| c1 | c8 |" in report
+    assert (tmp_path / "rmse.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_ablations_tables_by_hand():
     """scripts/ablations.py's tables from hand-made episodes: the paired difference per cell
     with its t interval, the cells' stratified mean and interval, and the summary row."""
