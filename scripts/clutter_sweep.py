@@ -14,13 +14,14 @@ against the clutter rate per scenario and path mode:
   by seed, as the mean over the four scenarios with its 95 % stratified interval (each
   scenario a stratum of equal weight);
 - the calibration on steps where a sensor senses the target, per tracker, path mode and
-  clutter rate: the 3-sigma coverage per axis (mean over episodes, the lowest of the eight
-  scenario-axes in parentheses) and the median over episodes of the median 2-D NEES
-  (nominal 1.39).
+  clutter rate: the 3-sigma coverage (mean over the episodes, both axes and the four
+  scenarios; the lowest of the eight scenario-axes in parentheses) and the median over the
+  episodes of the four scenarios of each one's median 2-D NEES (nominal 1.39).
 
 The runs go through the evaluation's results store (``--out``, resumable, each run stored as
-it finishes); ``--out results/paper`` reuses the ``--paper`` grid's runs at clutter 1 and 5
-on the reference paths for the same version and seeds.
+it finishes); a store that already holds runs with the same keys reuses them, so
+``--out results/paper`` takes the ``--paper`` grid's runs of the same version (clutter 1
+and 5, reference paths) instead of running them again.
 
     python scripts/clutter_sweep.py --report docs/clutter_sweep.md \\
         --figure docs/figures/clutter_sweep.png
