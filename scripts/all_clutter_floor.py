@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402, F401  (registers the environments)
 from baselines.shape_floor import shape_known_posteriors, start_box  # noqa: E402
-from dgpt_gym.benchmark.episodes import run_episodes  # noqa: E402
+from dgpt_gym.benchmark.episodes import root_mean_square, run_episodes  # noqa: E402
 from dgpt_gym.registry import make_tracker, tracker_ids  # noqa: E402
 
 SCENARIOS = ["S1", "S2", "S3", "S4"]
@@ -88,11 +88,6 @@ def make_env(scenario: str, trajectory: str, clutter_rate: float, clutter_sensor
     )
 
 
-def rms(values) -> float:
-    """The root mean square, how the cells pool their episodes' RMSEs."""
-    return float(np.sqrt(np.mean(np.square(values))))
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--first-seed", type=int, default=0)
@@ -142,9 +137,9 @@ def main(argv: list[str] | None = None) -> None:
             tracker_rmse[mode] = np.array([r.metrics()["rmse_2d"] for r in results])
 
         floor, all_, detecting = (
-            rms(floor_rmse),
-            rms(tracker_rmse["all"]),
-            rms(tracker_rmse["detecting"]),
+            root_mean_square(floor_rmse),
+            root_mean_square(tracker_rmse["all"]),
+            root_mean_square(tracker_rmse["detecting"]),
         )
         ambiguous = [value for value in least_ess if not np.isnan(value)]
         least = f"{min(ambiguous):7.0f}" if ambiguous else "      -"

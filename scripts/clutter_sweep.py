@@ -41,7 +41,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
-from dgpt_gym.benchmark.episodes import signed_interval, stratified_difference  # noqa: E402
+from dgpt_gym.benchmark.episodes import (  # noqa: E402
+    root_mean_square,
+    signed_interval,
+    stratified_difference,
+)
 from dgpt_gym.benchmark.plots import new_figure, save_figure  # noqa: E402
 from dgpt_gym.benchmark.sweep import Grid, on_every_path_mode, sweep_metrics  # noqa: E402
 from dgpt_gym.env import TRAJECTORY_MODES  # noqa: E402
@@ -64,11 +68,6 @@ def path_grids(trackers, clutter_rates, runs: int, first_seed: int) -> dict[str,
         first_seed=first_seed,
     )
     return on_every_path_mode(grid)
-
-
-def root_mean_square(values) -> float:
-    """sqrt(mean(values^2)): the RMS over episodes of each episode's RMSE."""
-    return float(np.sqrt(np.mean(np.square(values))))
 
 
 def _rate(clutter: float) -> str:

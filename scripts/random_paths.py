@@ -38,7 +38,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgpt_gym  # noqa: E402
-from dgpt_gym.benchmark.episodes import interval_half_width, signed_interval  # noqa: E402
+from dgpt_gym.benchmark.episodes import (  # noqa: E402
+    interval_half_width,
+    root_mean_square,
+    signed_interval,
+)
 from dgpt_gym.benchmark.sweep import Grid, on_every_path_mode, sweep_metrics  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
@@ -63,11 +67,6 @@ def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
         first_seed=first_seed,
     )
     return on_every_path_mode(grid)
-
-
-def root_mean_square(values, axis=-1):
-    """sqrt(mean(values^2)): the RMS over episodes of each episode's RMSE."""
-    return np.sqrt(np.mean(np.square(values), axis=axis))
 
 
 def ratio_interval(fixed, random, seed: int = 0) -> tuple[float, float, float]:

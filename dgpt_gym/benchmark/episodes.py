@@ -39,6 +39,7 @@ __all__ = [
     "interval_half_width",
     "stratified_difference",
     "signed_interval",
+    "root_mean_square",
 ]
 
 
@@ -297,6 +298,12 @@ def interval_half_width(values) -> float:
         return float("nan")
     quantile = stats.t.ppf(0.975, values.size - 1)
     return float(quantile * np.std(values, ddof=1) / np.sqrt(values.size))
+
+
+def root_mean_square(values, axis=-1):
+    """sqrt(mean(values^2)) along ``axis``: how a cell pools its episodes' RMSEs (the RMS
+    over episodes of each episode's RMSE) in the study scripts."""
+    return np.sqrt(np.mean(np.square(values), axis=axis))
 
 
 def stratified_difference(differences: list[np.ndarray]) -> tuple[float, float]:
