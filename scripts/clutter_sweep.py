@@ -74,6 +74,11 @@ def _rate(clutter: float) -> str:
     return f"{clutter:g}"
 
 
+def finite(values: np.ndarray) -> np.ndarray:
+    """The finite entries of ``values`` (a tracker without a variance stores NaN coverage)."""
+    return values[np.isfinite(values)]
+
+
 def report(episodes: dict[str, dict], trackers, clutter_rates) -> str:
     """The Markdown tables of the module docstring from each path mode's stored metrics
     (:func:`~dgpt_gym.benchmark.sweep.stored_metrics`, keyed by cell)."""
@@ -142,22 +147,28 @@ def report(episodes: dict[str, dict], trackers, clutter_rates) -> str:
         for mode in episodes:
             cells = []
             for clutter in clutter_rates:
-                coverage = [
-                    100
-                    * np.nanmean(column(mode, tracker, s, clutter, f"coverage_3sigma_{a}_detected"))
-                    for s in SCENARIOS
-                    for a in "xy"
-                ]
-                nees = [
-                    column(mode, tracker, s, clutter, "nees_median_detected") for s in SCENARIOS
-                ]
-                if not np.isfinite(coverage).any():
-                    break
-                cells.append(
-                    f"{np.nanmean(coverage):.2f} ({np.nanmin(coverage):.2f}), "
-                    f"{np.nanmedian(np.concatenate(nees)):.2f}"
+                # per scenario-axis, the mean over the episodes that report a variance
+                coverage = []
+                for scenario in SCENARIOS:
+                    for a in "xy":
+                        key = f"coverage_3sigma_{a}_detected"
+                        values = finite(column(mode, tracker, scenario, clutter, key))
+                        if values.size:
+                            coverage.append(100 * np.mean(values))
+                if not coverage:  # no variance reported in this cell
+                    cells.append("-")
+                    continue
+                nees = finite(
+                    np.concatenate(
+                        [
+                            column(mode, tracker, s, clutter, "nees_median_detected")
+                            for s in SCENARIOS
+                        ]
+                    )
                 )
-            if cells:
+                median = np.median(nees) if nees.size else np.nan
+                cells.append(f"{np.mean(coverage):.2f} ({np.min(coverage):.2f}), {median:.2f}")
+            if any(cell != "-" for cell in cells):
                 lines.append(f"| `{tracker}` | {mode} | " + " | ".join(cells) + " |")
     lines.append("")
     return "\n".join(lines)

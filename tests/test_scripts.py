@@ -654,23 +654,26 @@ def test_fault_check_tells_a_caught_fault_from_a_survived_one():
     assert source.read_text() == before
 
 
+def hand_made_episodes(rmse, coverage_x=0.99, nees=1.5):
+    """Stored metrics of one episode per value of ``rmse``, as the study scripts read them:
+    3-sigma coverage ``coverage_x`` on X and 1 on Y, median NEES ``nees``."""
+    return [
+        {
+            "rmse_2d": value,
+            "coverage_3sigma_x_detected": coverage_x,
+            "coverage_3sigma_y_detected": 1.0,
+            "nees_median_detected": nees,
+        }
+        for value in rmse
+    ]
+
+
 def test_random_paths_tables_by_hand():
     """scripts/random_paths.py's tables from hand-made episodes: the RMS over episodes, the
     random / reference ratio (RMS 7.07 over 3.54 = 2), the paired difference to dgpt-rbcm
     and the calibration columns."""
     module = load_script("random_paths")
-
-    def episodes(rmse, coverage=0.99, nees=1.5):
-        return [
-            {
-                "rmse_2d": value,
-                "coverage_3sigma_x_detected": coverage,
-                "coverage_3sigma_y_detected": 1.0,
-                "nees_median_detected": nees,
-            }
-            for value in rmse
-        ]
-
+    episodes = hand_made_episodes
     cells = [(s, module.NOISE_STD, c) for s in module.SCENARIOS for c in module.CLUTTER_RATES]
     fixed = {(t, *cell): episodes([3.0, 4.0]) for t in ("dgpt-rbcm", "other") for cell in cells}
     random = {("dgpt-rbcm", *cell): episodes([6.0, 8.0]) for cell in cells}
@@ -704,18 +707,7 @@ def test_clutter_sweep_tables_by_hand():
     paired difference to dgpt-rbcm averaged over the four scenarios with its stratified
     interval, and the calibration cell (mean and lowest scenario-axis, median NEES)."""
     module = load_script("clutter_sweep")
-
-    def episodes(rmse, coverage_x=0.99, nees=1.5):
-        return [
-            {
-                "rmse_2d": value,
-                "coverage_3sigma_x_detected": coverage_x,
-                "coverage_3sigma_y_detected": 1.0,
-                "nees_median_detected": nees,
-            }
-            for value in rmse
-        ]
-
+    episodes = hand_made_episodes
     rates = [1.0, 20.0]
     by_mode = {}
     for mode in ("fixed", "random"):
@@ -728,8 +720,15 @@ def test_clutter_sweep_tables_by_hand():
                 cells[("other", *cell)] = episodes(
                     [4.0 + index, 7.0 + index], 0.98 - 0.01 * index, nees=2.0 + index**2
                 )
+                cells[("other", *cell)][1]["coverage_3sigma_x_detected"] -= 0.02
+                # no variance at clutter 1 (NaN coverage on both axes), some at clutter 20
+                blind = episodes([5.0], nees=np.nan)
+                blind[0]["coverage_3sigma_y_detected"] = np.nan if rate == 1.0 else 1.0
+                if rate == 1.0:
+                    blind[0]["coverage_3sigma_x_detected"] = np.nan
+                cells[("blind", *cell)] = blind
         by_mode[mode] = cells
-    text = module.report(by_mode, ["dgpt-rbcm", "other"], rates)
+    text = module.report(by_mode, ["dgpt-rbcm", "other", "blind"], rates)
     rows = [line for line in text.splitlines() if line.startswith("| ")]
     assert "| S1 | `dgpt-rbcm` | 3.54 | 3.54 |" in rows  # RMS of 3 and 4
     assert f"| S2 | `other` | {np.sqrt((25 + 64) / 2):.2f} | {np.sqrt((25 + 64) / 2):.2f} |" in rows
@@ -738,10 +737,12 @@ def test_clutter_sweep_tables_by_hand():
     half = stats.norm.ppf(0.975) * np.sqrt(4.0) / 4
     paired = next(row for row in rows if row.startswith("| `other` | fixed | **"))
     assert paired.split(" | ")[2] == f"**+3.50 ± {half:.2f}**"
-    # coverage: X 98, 97, 96, 95 % and Y 100 % in the four scenarios; NEES 2, 3, 6, 11
-    # (two episodes each): median 4.5, mean 5.5
+    # coverage X: episodes at 98 and 96 % in S1 (mean 97), then 96, 95, 94 %; Y 100 % in
+    # the four scenarios; NEES 2, 3, 6, 11 (two episodes each): median 4.5, mean 5.5
     calibration = [row for row in rows if row.startswith("| `other` | random | 9")]
-    assert calibration[0].split(" | ")[2] == f"{(98 + 97 + 96 + 95 + 400) / 8:.2f} (95.00), 4.50"
+    assert calibration[0].split(" | ")[2] == f"{(97 + 96 + 95 + 94 + 400) / 8:.2f} (94.00), 4.50"
+    # a cell without variance is "-", the others keep their columns
+    assert "| `blind` | fixed | - | 99.50 (99.00), nan |" in rows
 
 
 def test_clutter_sweep_runs_resumes_and_draws(tmp_path):
