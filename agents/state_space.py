@@ -43,6 +43,7 @@ __all__ = [
     "turn_predict",
     "expert_posteriors",
     "expert_weights",
+    "mixture_summaries",
     "fused_update",
     "aggregate_error_var",
     "aggregate_error_cov",
@@ -142,6 +143,45 @@ def expert_weights(method: str, prior_var: np.ndarray, noise_var: np.ndarray) ->
     if method in ("poe", "bcm"):
         return np.ones(noise_var.shape)
     return 0.5 * np.log1p(np.asarray(prior_var)[..., None] / noise_var)
+
+
+MIXTURE_SPREAD_SHARE = 0.99
+"""The largest spread :func:`mixture_summaries` takes, as a share of the summary's
+innovation variance: a spread at or above it would make the sensor's mixture posterior wider
+than its prior, which no Gaussian measurement gives."""
+
+
+def mixture_summaries(prior_mean, prior_var, summaries, noise_var, spread):
+    """The pseudo-measurements whose Kalman update gives each sensor's mixture posterior.
+
+    A sensor whose measurements z_j carry association weights w_j (eq. (27); sum 1) has, as
+    its local posterior of the position, the mixture over which z_j is the target's; its
+    moments (the PDA update, Bar-Shalom & Tse 1975) are, with innovation variance
+    a = p + r (p = ``prior_var``, r = ``noise_var``), gain K = p / a, nu = zbar - mu:
+
+        mean mu + K nu,    variance (1 - K) p + K^2 S,
+
+    S = ``spread`` = sum_j w_j (z_j - zbar)^2. The summary zbar taken as one measurement of
+    variance r + S (eq. (28)) gives a smaller gain and the variance p (r + S) / (a + S),
+    narrower by p^2 S^2 / (a^2 (a + S)): it uses the prediction twice, once in the weights
+    and once as the prior it updates. The Kalman update with the pseudo-measurement
+
+        z' = mu + nu a / (a - S)   of variance   r' = (a r + p S) / (a - S)
+
+    gives the mixture's moments exactly, for the whole state (the update is rank one in
+    the position), when S < a; the spread is capped at :data:`MIXTURE_SPREAD_SHARE` of a,
+    which keeps the mean and gives a variance just under the prior's. S = 0 returns
+    ``summaries`` and ``noise_var``.
+
+    ``prior_mean``, ``prior_var`` (...,); ``summaries``, ``noise_var``, ``spread`` (..., M).
+    Returns z' and r' (..., M)."""
+    prior_mean = np.asarray(prior_mean, dtype=float)[..., None]
+    prior_var = np.asarray(prior_var, dtype=float)[..., None]
+    innovation_var = prior_var + noise_var
+    spread = np.minimum(spread, MIXTURE_SPREAD_SHARE * innovation_var)
+    scale = innovation_var / (innovation_var - spread)
+    pseudo = prior_mean + (summaries - prior_mean) * scale
+    return pseudo, (innovation_var * noise_var + prior_var * spread) / (innovation_var - spread)
 
 
 class PooledSummaries(NamedTuple):

@@ -56,11 +56,20 @@ class Fault(NamedTuple):
 FAULTS = (
     Fault(
         "experts-return-prior",
-        "every expert of the state-space trackers returns its prior: its summary carries "
-        "no information (variance 1e12)",
+        "every expert of the state-space trackers returns its prior: what it updates with "
+        "carries no information (variance 1e12)",
         "agents/state_space_dgpt.py",
-        "summary_var = noise_var + np.swapaxes(gated.spread, -1, -2)",
-        "summary_var = 1e12 + noise_var + np.swapaxes(gated.spread, -1, -2)",
+        "        if self.aggregation in POOLED_METHODS:  # the sums serve",
+        "        update_var = 1e12 + update_var\n"
+        "        if self.aggregation in POOLED_METHODS:  # the sums serve",
+    ),
+    Fault(
+        "experts-update-with-summaries",
+        "the state-space trackers' experts update with their summaries as measurements "
+        "instead of with their sensors' mixture posteriors (the PDA moments)",
+        "agents/state_space_dgpt.py",
+        'if self.expert_update == "mixture":',
+        "if False:",
     ),
     Fault(
         "trend-experts-return-prior",

@@ -44,7 +44,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from agents.aggregation import AGGREGATIONS  # noqa: E402
 from agents.registration import SEARCHING  # noqa: E402
+from agents.state_space_dgpt import EXPERT_UPDATES  # noqa: E402
 from dgpt_gym.benchmark.episodes import interval_half_width  # noqa: E402
 from dgpt_gym.benchmark.sweep import RunUnit, episode_results, make_blocks, run_units  # noqa: E402
 
@@ -381,6 +383,21 @@ CANDIDATES = {
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "process_noise_prior": "boundary-avoiding"},
     ),
+    **{
+        f"dgpt-{aggregation}-{update}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": aggregation, **SEARCHING, "expert_update": update},
+        )
+        for aggregation in AGGREGATIONS
+        for update in EXPERT_UPDATES
+    },
+    **{
+        f"hybrid-{update}": (
+            "agents.hybrid:HybridFilter",
+            {"variant": "exact", **SEARCHING, "expert_update": update},
+        )
+        for update in EXPERT_UPDATES
+    },
     "ss-point-variance": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "summary_variance": "point"},

@@ -27,6 +27,7 @@ import dgpt_gym
 from agents import gp
 from agents.gating import gate_measurements, target_probabilities
 from agents.state_space import (
+    MIXTURE_SPREAD_SHARE,
     Manoeuvre,
     PooledSummaries,
     WindowStep,
@@ -38,6 +39,7 @@ from agents.state_space import (
     filter_steps,
     filter_window,
     fused_update,
+    mixture_summaries,
     ncv_predict,
     pool_summaries,
     step_log_likelihood,
@@ -101,6 +103,79 @@ def dense_aggregate(method, prior_mean, prior_cov, summaries, noise_var):
         information = information + (1.0 - sum(betas)) * prior_precision @ prior_mean
     cov = np.linalg.inv(precision)
     return cov @ information, cov
+
+
+def dense_mixture_posterior(prior_mean, prior_cov, points, weights, noise_var):
+    """The moments of the mixture over which of a sensor's ``points`` (k,) on one axis is
+    the target's, with probabilities ``weights`` (k,): point j's component is the Kalman
+    update of N(``prior_mean``, ``prior_cov``) with z_j of variance ``noise_var``, by
+    explicit inverses. Points whose weighted spread about their weighted mean exceeds
+    :data:`MIXTURE_SPREAD_SHARE` of the innovation variance are first drawn towards that
+    mean until it does not (the cap of :func:`mixture_summaries`)."""
+    summary = weights @ points
+    spread = weights @ (points - summary) ** 2
+    cap = MIXTURE_SPREAD_SHARE * (prior_cov[0, 0] + noise_var)
+    if spread > cap:
+        points = summary + (points - summary) * np.sqrt(cap / spread)
+    h = np.array([1.0, 0.0])
+    prior_precision = np.linalg.inv(prior_cov)
+    covs = [np.linalg.inv(prior_precision + np.outer(h, h) / noise_var)] * len(points)
+    means = [c @ (prior_precision @ prior_mean + h * z / noise_var) for c, z in zip(covs, points)]
+    mean = np.sum([w * m for w, m in zip(weights, means)], axis=0)
+    cov = sum(w * (c + np.outer(m - mean, m - mean)) for w, m, c in zip(weights, means, covs))
+    return mean, cov
+
+
+def equivalent_measurement(prior_mean, prior_cov, mean, cov):
+    """The position measurement z of variance r whose Kalman update of N(``prior_mean``,
+    ``prior_cov``) is N(``mean``, ``cov``), from the information form:
+    cov^-1 - prior_cov^-1 = e1 e1^T / r and cov^-1 mean - prior_cov^-1 prior_mean = e1 z / r
+    (the velocity entries must vanish: a position measurement's gain is rank one)."""
+    precision_gain = np.linalg.inv(cov) - np.linalg.inv(prior_cov)
+    information_gain = np.linalg.inv(cov) @ mean - np.linalg.inv(prior_cov) @ prior_mean
+    scale = abs(precision_gain[0, 0])
+    np.testing.assert_allclose(precision_gain[[0, 1, 1], [1, 0, 1]], 0.0, atol=1e-9 * scale)
+    np.testing.assert_allclose(information_gain[1], 0.0, atol=1e-9 * np.abs(information_gain[0]))
+    return information_gain[0] / precision_gain[0, 0], 1.0 / precision_gain[0, 0]
+
+
+@given(seed=seeds, n_points=st.integers(1, 5))
+@settings(max_examples=50, deadline=None)
+def test_mixture_summaries_give_the_moments_of_the_mixture_posterior(seed, n_points):
+    """The Kalman update with :func:`mixture_summaries`' pseudo-measurement is, for the
+    whole state, the moment-matched mixture over which point is the target's (dense, by
+    explicit inverses; weights the points' predictive likelihoods, as eq. (27) makes them;
+    the points spread so widely that the cap acts in about a fifth of the examples). One
+    point returns it unchanged."""
+    rng = np.random.default_rng(seed)
+    mean, cov = random_state(rng)
+    noise_var = rng.uniform(0.3, 20.0)
+    innovation_var = cov[0, 0] + noise_var
+    points = mean[0] + rng.normal(0.0, 2.0 * np.sqrt(innovation_var), n_points)
+    log_likelihood = -0.5 * (points - mean[0]) ** 2 / innovation_var
+    weights = np.exp(log_likelihood - np.logaddexp.reduce(log_likelihood))
+    summary = weights @ points
+    spread = weights @ (points - summary) ** 2
+    pseudo, pseudo_var = mixture_summaries(mean[0], cov[0, 0], summary, noise_var, spread)
+    got_mean, got_cov = expert_posteriors(mean, cov, pseudo, pseudo_var)
+    want_mean, want_cov = dense_mixture_posterior(mean, cov, points, weights, noise_var)
+    np.testing.assert_allclose(got_mean[0], want_mean, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(got_cov[0], want_cov, rtol=1e-8, atol=1e-8)
+    if n_points == 1:
+        np.testing.assert_allclose([pseudo[0], pseudo_var[0]], [points[0], noise_var])
+
+
+def test_mixture_summaries_keep_the_mean_and_stay_within_the_prior_when_the_spread_is_wide():
+    """Two points 10 m either side of a prediction of variance 4 with noise variance 1 and
+    equal weights: the mixture's variance, (1 - K) p + K^2 S = 0.8 + 0.64 x 100 = 64.8, is
+    wider than the prior (4), which no measurement gives. The spread is capped at
+    0.99 x a = 4.95: the mean moves by K (zbar - mu) as the mixture's does, and the variance
+    is (1 - K) p + K^2 x 4.95 = 3.968, just under the prior's."""
+    pseudo, pseudo_var = mixture_summaries(0.0, 4.0, np.array([3.0]), np.array([1.0]), 100.0)
+    mean, cov = expert_posteriors(np.zeros(2), np.diag([4.0, 1.0]), pseudo, pseudo_var)
+    assert MIXTURE_SPREAD_SHARE == 0.99
+    np.testing.assert_allclose(mean[0, 0], 0.8 * 3.0)
+    np.testing.assert_allclose(cov[0, 0, 0], 0.2 * 4.0 + 0.64 * 4.95)
 
 
 @pytest.mark.parametrize("method", ["poe", "gpoe", "bcm", "rbcm"])
@@ -570,7 +645,8 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
         log_weight, axis_means, axis_covs, axis_bounds = np.log(probability), [], [], []
         # a summary's variance: sigma_n^2 = 1 times the sum of its squared weights (the
         # variance of a weighted mean of target points) plus the weighted spread
-        sorted_sensors = np.sort([0, 1, 2, 1])  # the order of gated.weights
+        order = np.argsort([0, 1, 2, 1], kind="stable")  # the order of gated.weights
+        sorted_sensors, sorted_points = np.array([0, 1, 2, 1])[order], points[order]
         squares = np.array(
             [np.sum(gated.weights[sorted_sensors == sensor] ** 2) for sensor in gated.sensors]
         )
@@ -581,13 +657,29 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
                 np.full(z.size, predicted_position[axis]),
                 p * np.ones((z.size, z.size)) + np.diag(r),
             ).logpdf(z)
-            m, c = dense_aggregate("rbcm", *prediction[axis], z, r)
+            # each expert's posterior: the mixture over which of its sensor's points is the
+            # target's, each of the summary's noise variance; aggregated as the measurement
+            # that gives it
+            experts = [
+                equivalent_measurement(
+                    *prediction[axis],
+                    *dense_mixture_posterior(
+                        *prediction[axis],
+                        sorted_points[sorted_sensors == sensor, axis],
+                        gated.weights[sorted_sensors == sensor],
+                        square,
+                    ),
+                )
+                for sensor, square in zip(gated.sensors, squares)
+            ]
+            pseudo, pseudo_var = np.array(experts).T
+            m, c = dense_aggregate("rbcm", *prediction[axis], pseudo, pseudo_var)
             axis_means.append(m)
             axis_covs.append(c)
             # the prior's error: the prediction's covariance plus the excess carried by F
             carried = (transition[:2, :2] @ excess[axis] @ transition[:2, :2].T)[0, 0]
             axis_bounds.append(
-                np.sqrt(dense_error_var("rbcm", prediction[axis][1], r, p + carried))
+                np.sqrt(dense_error_var("rbcm", prediction[axis][1], pseudo_var, p + carried))
             )
         log_weights.append(log_weight)
         means.append(axis_means)
@@ -1034,9 +1126,9 @@ def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregati
     """On every step with data of an S3 episode at clutter 5 (so several sensors and the
     manoeuvre's two process-noise components): each hypothesis's log weight is its log
     prior plus, per axis, the log density of its M summaries under its prediction,
-    N(mu 1, p 1 1^T + diag(s)) by scipy; and its posterior is the aggregation's in
-    information form, from explicit inverses (for BCM the Kalman update with all M
-    summaries at once)."""
+    N(mu 1, p 1 1^T + diag(s)) by scipy; and its posterior is the aggregation, in
+    information form from explicit inverses, of the experts' posteriors, each the PDA
+    moments of its sensor's measurements (the mixture over which is the target's)."""
     tracker = StateSpaceDGPT(aggregation=aggregation)
     recorded = {}
     own_hypotheses = tracker._hypotheses
@@ -1068,18 +1160,35 @@ def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregati
                     expected += multivariate_normal.logpdf(
                         z, np.full(z.size, prior_means[h, axis, 0]), p + np.diag(s)
                     )
-                    # eqs. (8)-(20) in information form with explicit inverses: precision
-                    # a P0^-1 + sum_i beta_i e1 e1^T / s_i (a = M for PoE, else 1; beta_i
-                    # eq. (11) for RBCM with several experts, else 1)
-                    prior_precision = np.linalg.inv(prior_covs[h, axis])
-                    beta = np.ones(z.size)
-                    if aggregation == "rbcm" and z.size > 1:
-                        beta = 0.5 * np.log1p(p / s)
-                    a = z.size if aggregation == "poe" else 1.0
-                    precision = a * prior_precision
-                    precision[0, 0] += np.sum(beta / s)
-                    information = a * prior_precision @ prior_means[h, axis]
-                    information[0] += np.sum(beta * z / s)
+                    # expert i's posterior: the PDA moments of its sensor's mixture, gain
+                    # K = P0 e1 / a, a = p + r_i (r_i its summary's noise variance), mean
+                    # mu + K (z_i - mu_p), covariance P0 - K K^T (a - S_i), the spread S_i
+                    # capped at 0.99 a; then eqs. (8)-(20) in information form with explicit
+                    # inverses: precision sum_i beta_i P_i^-1 + (1 - sum_i beta_i) P0^-1 for
+                    # BCM and RBCM (sum_i P_i^-1 for PoE), beta_i = 1/2 log(det P0 / det P_i)
+                    # for RBCM with several experts, else 1
+                    prior_mean, prior_cov = prior_means[h, axis], prior_covs[h, axis]
+                    prior_precision = np.linalg.inv(prior_cov)
+                    spread = own["spread"][h, axis]
+                    innovation = p + s - spread
+                    spread = np.minimum(spread, MIXTURE_SPREAD_SHARE * innovation)
+                    precision, information, betas = 0.0, 0.0, []
+                    for z_i, a_i, spread_i in zip(z, innovation, spread):
+                        gain = prior_cov[:, 0] / a_i
+                        expert_cov = prior_cov - np.outer(gain, gain) * (a_i - spread_i)
+                        expert_mean = prior_mean + gain * (z_i - prior_mean[0])
+                        beta = 1.0
+                        if aggregation == "rbcm" and z.size > 1:
+                            determinants = np.linalg.det(prior_cov) / np.linalg.det(expert_cov)
+                            beta = 0.5 * np.log(determinants)
+                        betas.append(beta)
+                        precision = precision + beta * np.linalg.inv(expert_cov)
+                        information = information + beta * np.linalg.solve(expert_cov, expert_mean)
+                    if aggregation != "poe":
+                        precision = precision + (1.0 - sum(betas)) * prior_precision
+                        information = (
+                            information + (1.0 - sum(betas)) * prior_precision @ prior_mean
+                        )
                     cov = np.linalg.inv(precision)
                     np.testing.assert_allclose(own["mean"][h, axis], cov @ information, rtol=1e-9)
                     np.testing.assert_allclose(own["cov"][h, axis], cov, rtol=1e-7, atol=1e-9)
