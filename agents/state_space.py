@@ -154,7 +154,7 @@ than its prior, which no Gaussian measurement gives."""
 def mixture_summaries(prior_mean, prior_var, summaries, noise_var, spread):
     """The pseudo-measurements whose Kalman update gives each sensor's mixture posterior.
 
-    A sensor whose measurements z_j carry association weights w_j (eq. (27); sum 1) has, as
+    A sensor whose measurements z_j carry association weights w_j (summing to 1) has, as
     its local posterior of the position, the mixture over which z_j is the target's; its
     moments (the PDA update, Bar-Shalom & Tse 1975) are, with innovation variance
     a = p + r (p = ``prior_var``, r = ``noise_var``), gain K = p / a, nu = zbar - mu:

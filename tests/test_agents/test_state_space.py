@@ -924,6 +924,7 @@ def test_set_estimate_with_the_trackers_own_posterior_changes_nothing():
         ({"turn_process_noise": -1.0}, "turn_process_noise"),
         ({"mode_stay_probability": 1.5}, "mode_stay_probability"),
         ({"process_noise_prior": "gamma"}, "process_noise_prior"),
+        ({"expert_update": "pda"}, "expert_update"),
         ({"gap_end": "particles"}, "gap_end"),
         ({"gap_restart_probability": 1.0}, "gap_restart_probability"),
         ({"gap_restart_probability": -0.1}, "gap_restart_probability"),
