@@ -166,11 +166,11 @@ def test_mixture_summaries_give_the_moments_of_the_mixture_posterior(seed, n_poi
 
 
 def test_mixture_summaries_keep_the_mean_and_stay_within_the_prior_when_the_spread_is_wide():
-    """Two points 10 m either side of a prediction of variance 4 with noise variance 1 and
-    equal weights: the mixture's variance, (1 - K) p + K^2 S = 0.8 + 0.64 x 100 = 64.8, is
-    wider than the prior (4), which no measurement gives. The spread is capped at
-    0.99 x a = 4.95: the mean moves by K (zbar - mu) as the mixture's does, and the variance
-    is (1 - K) p + K^2 x 4.95 = 3.968, just under the prior's."""
+    """Two points of equal weight at 13 and -7 m from a prediction at 0 of variance 4, noise
+    variance 1: summary 3, spread 100. The mixture's variance, (1 - K) p + K^2 S =
+    0.8 + 0.64 x 100 = 64.8, is wider than the prior (4), which no measurement gives. The
+    spread is capped at 0.99 x a = 4.95: the mean moves by K (zbar - mu) as the mixture's
+    does, and the variance is (1 - K) p + K^2 x 4.95 = 3.968, just under the prior's."""
     pseudo, pseudo_var = mixture_summaries(0.0, 4.0, np.array([3.0]), np.array([1.0]), 100.0)
     mean, cov = expert_posteriors(np.zeros(2), np.diag([4.0, 1.0]), pseudo, pseudo_var)
     assert MIXTURE_SPREAD_SHARE == 0.99
