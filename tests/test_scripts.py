@@ -689,15 +689,21 @@ def test_random_paths_tables_by_hand():
     assert value == pytest.approx(2.0) and low <= value <= high
 
 
+def run_on_both_path_modes_then_resume(script, args, runs):
+    """Run a study script with ``args``: it must run ``runs`` episodes on each path mode,
+    then, run again, find every one in its store."""
+    first = run_script(script, *args)
+    assert first.returncode == 0, first.stderr
+    assert f"fixed paths: {runs} runs" in first.stdout
+    assert f"random paths: {runs} runs" in first.stdout
+    again = run_script(script, *args)
+    assert f"random paths: 0 runs, {runs} already stored" in again.stdout
+
+
 def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     args = ["--trackers", "dgpt-rbcm", "centroid", "--runs", "2", "--workers", "1"]
     args += ["--out", str(tmp_path), "--report", str(tmp_path / "report.md"), "--no-progress"]
-    first = run_script("random_paths.py", *args)
-    assert first.returncode == 0, first.stderr
-    # 2 trackers x 8 cells x 2 seeds in each mode
-    assert "fixed paths: 32 runs" in first.stdout and "random paths: 32 runs" in first.stdout
-    again = run_script("random_paths.py", *args)
-    assert "random paths: 0 runs, 32 already stored" in again.stdout
+    run_on_both_path_modes_then_resume("random_paths.py", args, 32)  # 2 x 8 cells x 2 seeds
     report = (tmp_path / "report.md").read_text()
     assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
 
@@ -749,12 +755,8 @@ def test_clutter_sweep_runs_resumes_and_draws(tmp_path):
     args = ["--trackers", "dgpt-rbcm", "centroid", "--runs", "1", "--clutter-rates", "1", "8"]
     args += ["--workers", "1", "--out", str(tmp_path), "--no-progress"]
     args += ["--report", str(tmp_path / "report.md"), "--figure", str(tmp_path / "rmse.png")]
-    first = run_script("clutter_sweep.py", *args)
-    assert first.returncode == 0, first.stderr
     # 2 trackers x 4 scenarios x 2 clutter rates x 1 seed in each mode
-    assert "fixed paths: 16 runs" in first.stdout and "random paths: 16 runs" in first.stdout
-    again = run_script("clutter_sweep.py", *args)
-    assert "random paths: 0 runs, 16 already stored" in again.stdout
+    run_on_both_path_modes_then_resume("clutter_sweep.py", args, 16)
     report = (tmp_path / "report.md").read_text()
     # 8 RMSE rows (4 scenarios x 2 modes), 2 paired and 2 calibration rows
     assert report.count("| `centroid` |") == 12 and "| c1 | c8 |" in report

@@ -1129,7 +1129,9 @@ def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregati
     prior plus, per axis, the log density of its M summaries under its prediction,
     N(mu 1, p 1 1^T + diag(s)) by scipy; and its posterior is the aggregation, in
     information form from explicit inverses, of the experts' posteriors, each the PDA
-    moments of its sensor's measurements (the mixture over which is the target's)."""
+    moments of its sensor's measurements (the mixture over which is the target's), and its
+    error variance the dense one with each expert as the measurement that gives its
+    posterior."""
     tracker = StateSpaceDGPT(aggregation=aggregation)
     recorded = {}
     own_hypotheses = tracker._hypotheses
@@ -1173,11 +1175,22 @@ def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregati
                     spread = own["spread"][h, axis]
                     innovation = p + s - spread
                     spread = np.minimum(spread, MIXTURE_SPREAD_SHARE * innovation)
-                    precision, information, betas = 0.0, 0.0, []
-                    for z_i, a_i, spread_i in zip(z, innovation, spread):
+                    precision, information, betas, pseudo_vars = 0.0, 0.0, [], []
+                    for i, (z_i, a_i, spread_i) in enumerate(zip(z, innovation, spread)):
                         gain = prior_cov[:, 0] / a_i
                         expert_cov = prior_cov - np.outer(gain, gain) * (a_i - spread_i)
                         expert_mean = prior_mean + gain * (z_i - prior_mean[0])
+                        np.testing.assert_allclose(
+                            own["expert_means"][h, axis, i], expert_mean, rtol=1e-9
+                        )
+                        np.testing.assert_allclose(
+                            own["expert_covs"][h, axis, i], expert_cov, rtol=1e-7, atol=1e-9
+                        )
+                        pseudo_vars.append(
+                            equivalent_measurement(prior_mean, prior_cov, expert_mean, expert_cov)[
+                                1
+                            ]
+                        )
                         beta = 1.0
                         if aggregation == "rbcm" and z.size > 1:
                             determinants = np.linalg.det(prior_cov) / np.linalg.det(expert_cov)
@@ -1193,6 +1206,13 @@ def test_each_hypothesis_weighs_its_prediction_by_the_dense_likelihood(aggregati
                     cov = np.linalg.inv(precision)
                     np.testing.assert_allclose(own["mean"][h, axis], cov @ information, rtol=1e-9)
                     np.testing.assert_allclose(own["cov"][h, axis], cov, rtol=1e-7, atol=1e-9)
+                    # the aggregate's error: each expert as the measurement that gives its
+                    # posterior, with independent noise of that variance
+                    np.testing.assert_allclose(
+                        own["error_std"][h, axis] ** 2,
+                        dense_error_var(aggregation, prior_cov, pseudo_vars),
+                        rtol=1e-7,
+                    )
                 np.testing.assert_allclose(own["log_weight"][h], expected, rtol=1e-9)
             checked += 1
             several += own["summaries"].shape[-1] >= 2
