@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-__all__ = ["RLEnvironment", "ENVIRONMENTS"]
+__all__ = ["RLEnvironment", "ENVIRONMENTS", "SENSORS_V2_TRACKER_OPTIONS"]
 
 
 class RLEnvironment(NamedTuple):
@@ -24,6 +24,41 @@ class RLEnvironment(NamedTuple):
     vector_entry_point: str
     kwargs: tuple[tuple[str, object], ...] = ()
 
+
+SENSORS_V2_TRACKER_OPTIONS = {
+    # dgpt-bcm as 0.9.0 built it:
+    "association": "local",
+    "manoeuvre_probability": 0.5,
+    "turn_rates": (),
+    "summary_variance": "point",
+    "silence_particles": 0,
+    "expert_update": "summary",
+    # the defaults with which the committed v2 agents were trained (0.23.1):
+    "aggregation": "bcm",
+    "delta": 0.003,
+    "gating": True,
+    "manoeuvre_intensity": 400.0,
+    "admission_probability": 0.5,
+    "process_noise": 1.0,
+    "learn_process_noise": True,
+    "turn_process_noise": 5.0,
+    "mode_stay_probability": 0.9,
+    "process_noise_prior": "none",
+    "gap_end": "reports",
+    "gap_restart_probability": 0.1,
+    "gap_end_evidence": "scans",
+    "gap_region_cell": 10.0,
+    "search_particles": 2000,
+    "search_settle_std": 3.0,
+    "search_birth_probability": 0.1,
+    "gap_birth_probability": 0.003,
+    "learning": "window",
+    "learning_memory": 50.0,
+}
+"""Every argument of ``StateSpaceDGPT`` but ``window`` (the environment's own), as
+``DGPTrackSensors-v2`` builds its tracker, so that no later default moves the task under its
+committed agents. A new argument of the tracker must be added here (a test checks that none is
+missing)."""
 
 ENVIRONMENTS: tuple[RLEnvironment, ...] = (
     RLEnvironment(
@@ -63,17 +98,7 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         (
             ("tracker", "dgpt-bcm"),
             ("window", 20),
-            # dgpt-bcm as 0.9.0 built it, with which the committed v2 agents were trained
-            (
-                "tracker_options",
-                {
-                    "association": "local",
-                    "manoeuvre_probability": 0.5,
-                    "turn_rates": (),
-                    "summary_variance": "point",
-                    "silence_particles": 0,
-                },
-            ),
+            ("tracker_options", SENSORS_V2_TRACKER_OPTIONS),
         ),
     ),
 )

@@ -137,7 +137,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``error_scale`` | sensing range | metres per unit of error penalty |
     | ``tracker`` | ``"dgpt-rbcm-trend"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm"`` |
     | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
-    | ``tracker_options`` | None | further keyword arguments of the tracker; ``DGPTrackSensors-v2`` fixes ``dgpt-bcm`` as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, no silence particles), with which its agents were trained |
+    | ``tracker_options`` | None | further keyword arguments of the tracker; ``DGPTrackSensors-v2`` fixes every argument of ``dgpt-bcm`` (``agents.rl.registration.SENSORS_V2_TRACKER_OPTIONS``): the model as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, ``expert_update="summary"``, no silence particles) and the rest as its agents were trained |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
     """

@@ -119,8 +119,9 @@ def test_a_lost_track_is_reacquired_by_waking_every_sensor(env_id):
 def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
     """The same class; v2 fixes ``tracker="dgpt-bcm"`` (window 20) as 0.9.0 built it (eq.
     (27) association, manoeuvre probability 0.5, no turn modes, a summary's variance
-    sigma_n^2 + its spread, no silence particles), so the same seed and actions give the
-    episode of v1 made with those arguments."""
+    sigma_n^2 + its spread, each expert updating with its summary, no silence particles),
+    so the same seed and actions give the episode of v1 made with those arguments, and not
+    the one of today's ``dgpt-bcm`` defaults."""
     from agents.state_space_dgpt import StateSpaceDGPT
 
     options = {
@@ -128,22 +129,48 @@ def test_v2_is_v1_with_the_distributed_ncv_tracker_inside():
         "manoeuvre_probability": 0.5,
         "turn_rates": (),
         "summary_variance": "point",
+        "expert_update": "summary",
         "silence_particles": 0,
     }
     v2 = gym.make("DGPTrackSensors-v2", scenario="S3").unwrapped
-    v1 = gym.make(
-        ENV_ID, scenario="S3", tracker="dgpt-bcm", window=20, tracker_options=options
-    ).unwrapped
+    v1, v1_mixture = (
+        gym.make(
+            ENV_ID, scenario="S3", tracker="dgpt-bcm", window=20, tracker_options=chosen
+        ).unwrapped
+        for chosen in (options, {**options, "expert_update": "mixture"})
+    )
     assert isinstance(v2.tracker, StateSpaceDGPT) and v2.tracker.window == 20
     assert v2.tracker.association == "local" and v2.tracker.manoeuvre.probability == 0.5
-    assert v2.tracker.silence_particles == 0
+    assert v2.tracker.silence_particles == 0 and v2.tracker.expert_update == "summary"
     assert type(gym.make(ENV_ID).unwrapped.tracker).__name__ == "DGPT"
-    for env in (v1, v2):
+    for env in (v1, v2, v1_mixture):
         env.reset(seed=7)
+    rewards = []
     for action in [NEAREST[8]] * 20 + [NEAREST[2]] * 10:
-        first, second = v1.step(action), v2.step(action)
+        first, second, third = v1.step(action), v2.step(action), v1_mixture.step(action)
         np.testing.assert_array_equal(first[0], second[0])
         assert first[1] == second[1]
+        rewards.append((second[1], third[1]))
+    assert any(pinned != mixture for pinned, mixture in rewards)  # the pin matters here
+
+
+def test_v2_fixes_every_argument_of_its_tracker():
+    """A new argument of ``StateSpaceDGPT``, or a changed default, must not move v2 under
+    the agents committed for it: v2 passes every argument but ``window`` (its own,
+    fixed at 20) explicitly."""
+    import inspect
+
+    from agents.rl.registration import SENSORS_V2_TRACKER_OPTIONS
+    from agents.state_space_dgpt import StateSpaceDGPT
+
+    arguments = set(inspect.signature(StateSpaceDGPT.__init__).parameters) - {"self"}
+    assert set(SENSORS_V2_TRACKER_OPTIONS) == arguments - {"window"}
+    tracker = gym.make("DGPTrackSensors-v2").unwrapped.tracker
+    for name, value in SENSORS_V2_TRACKER_OPTIONS.items():
+        if name.startswith("manoeuvre_"):
+            assert getattr(tracker.manoeuvre, name.removeprefix("manoeuvre_")) == value
+        else:
+            assert getattr(tracker, name) == value, name
 
 
 @pytest.mark.parametrize(
