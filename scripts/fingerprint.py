@@ -11,7 +11,13 @@ and ``-v2`` vector environments under seeded random actions.
 ``--quick`` runs two seeds per configuration, no blocks and shorter environment runs (a
 different hash). One line per episode, then the total. About 40 s on one core.
 
-    python scripts/fingerprint.py
+A change meant to move some of these numbers changes the total too; ``--compare`` with the
+output of a run before the change lists the lines that moved, so that one can check that
+only those meant to move did (the trackers changed, not an environment that pins an older
+model).
+
+    python scripts/fingerprint.py > before.txt
+    python scripts/fingerprint.py --compare before.txt
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -64,16 +71,38 @@ def vector_env_digest(env_id: str, steps: int) -> bytes:
     return digest.digest()
 
 
+def moved_lines(before: str, after: str) -> list[str]:
+    """The labels of the lines of ``after`` (this script's output) whose digest differs from
+    the line of the same label in ``before``, or that ``before`` lacks, in ``after``'s
+    order."""
+
+    def digests(text: str) -> dict[str, str]:
+        return dict(line.rsplit(" ", 1) for line in text.splitlines() if " " in line.strip())
+
+    old = digests(before)
+    return [label for label, digest in digests(after).items() if old.get(label) != digest]
+
+
 def main(argv=None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer episodes, a different hash")
+    parser.add_argument(
+        "--compare",
+        type=Path,
+        metavar="FILE",
+        help="a previous run's output: list the lines whose digest moved",
+    )
     args = parser.parse_args(argv)
+    if args.compare is not None and not args.compare.is_file():
+        parser.error(f"--compare: no such file {str(args.compare)!r}")
+    printed: list[str] = []
     seeds = list(range(2 if args.quick else 3))
     total = hashlib.sha256()
 
     def add(label: str, digest: bytes) -> None:
         total.update(digest)
-        print(label, digest.hex()[:12], flush=True)
+        printed.append(f"{label} {digest.hex()[:12]}")
+        print(printed[-1], flush=True)
 
     for scenario, clutter_rate, kwargs in CONFIGURATIONS:
         env = gym.make("DGPTrack-v0", scenario=scenario, clutter_rate=clutter_rate, **kwargs)
@@ -93,7 +122,13 @@ def main(argv=None) -> str:
             add(f"{label} lockstep block, seed {seed}", episode_digest(result))
     for env_id in VECTOR_ENVS:
         add(env_id, vector_env_digest(env_id, 60 if args.quick else 150))
-    print("ALL", total.hexdigest())
+    printed.append(f"ALL {total.hexdigest()}")
+    print(printed[-1])
+    if args.compare is not None:
+        moved = moved_lines(args.compare.read_text(), "\n".join(printed))
+        print(f"moved against {args.compare}: {len(moved)} of {len(printed)} lines")
+        for label in moved:
+            print("  moved:", label)
     return total.hexdigest()
 
 

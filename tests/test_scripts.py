@@ -472,6 +472,22 @@ def test_fingerprint_tells_apart_numbers_one_ulp_apart_and_repeats_itself():
     )
 
 
+def test_fingerprint_compare_lists_the_lines_that_moved(tmp_path):
+    """``--compare``: the labels (which hold spaces) whose digest changed or that the old
+    output lacks, in the new output's order; a missing file is refused by name."""
+    module = load_script("fingerprint")
+    before = "S1 clutter 1 dgpt-rbcm seed 0 aaaa\nDGPTrackSensors-v2 bbbb\nALL cccc\n"
+    after = "S1 clutter 1 dgpt-rbcm seed 0 aaab\nDGPTrackSensors-v2 bbbb\nnew line dddd\nALL cccd"
+    assert module.moved_lines(before, after) == [
+        "S1 clutter 1 dgpt-rbcm seed 0",
+        "new line",
+        "ALL",
+    ]
+    assert module.moved_lines(before, before) == []
+    refused = run_script("fingerprint.py", "--compare", str(tmp_path / "missing.txt"))
+    assert refused.returncode == 2 and "--compare: no such file" in refused.stderr
+
+
 def test_compare_cells_prints_a_row_per_tracker_and_rejects_a_missing_file(tmp_path):
     header = "tracker,scenario,noise_std,clutter_rate,rmse_2d,step_time_ms\n"
     (tmp_path / "old.csv").write_text(header + "gp,S1,1.0,1.0,8.0,0.5\npda,S1,1.0,1.0,9.0,0.2\n")
