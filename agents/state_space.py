@@ -171,7 +171,7 @@ def mixture_summaries(prior_mean, prior_var, summaries, noise_var, spread):
     gives the mixture's moments exactly, for the whole state (the update is rank one in
     the position), when S < a; the spread is capped at :data:`MIXTURE_SPREAD_SHARE` of a,
     which keeps the mean and gives a variance just under the prior's. S = 0 returns
-    ``summaries`` and ``noise_var``.
+    ``summaries`` and ``noise_var`` up to rounding.
 
     ``prior_mean``, ``prior_var`` (...,); ``summaries``, ``noise_var``, ``spread`` (..., M).
     Returns z' and r' (..., M)."""
