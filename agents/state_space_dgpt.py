@@ -588,12 +588,7 @@ class StateSpaceDGPT(TrackerBase):
             (:data:`LEARNING_WINDOW`).
         delta: total failure probability of the UCB, in (0, 1).
         gating: weigh each sensor's measurements (step 2); False takes their unweighted
-            mean. The mixture update (``expert_update``) is the posterior only with the
-            association's weights: with equal ones its mean moves the whole Kalman gain
-            toward the unweighted mean however spread the points are, so pair
-            ``gating=False`` with ``expert_update="summary"``, which counts the spread as
-            noise (held out, ``scripts/ablations.py``: +21.3 m against the default with
-            the mixture, +9.5 m with the summary update in 0.23.1).
+            mean, and the experts then update with it as a summary (``expert_update``).
         manoeuvre_intensity: q_m (m^2/s^3), the extra white-acceleration intensity of a
             manoeuvre step (:class:`agents.state_space.Manoeuvre`); 0 gives the plain NCV GP.
         manoeuvre_probability: the prior probability of a manoeuvre at each step, in [0, 1).
@@ -631,7 +626,14 @@ class StateSpaceDGPT(TrackerBase):
         mode_stay_probability: P(mode j at t | mode j at t - 1) of the modes' Markov chain,
             the rest spread evenly over the other modes, in [0, 1].
         summary_variance: ``"mean"`` or ``"point"`` (:data:`SUMMARY_VARIANCES`).
-        expert_update: ``"summary"`` or ``"mixture"`` (:data:`EXPERT_UPDATES`).
+        expert_update: ``"summary"`` or ``"mixture"`` (:data:`EXPERT_UPDATES`); None
+            (the default) is ``"mixture"`` with ``gating`` and ``"summary"`` without. The
+            mixture is the posterior only with the association's weights: with equal ones
+            its mean moves the whole Kalman gain toward the unweighted mean however spread
+            the points are, where the summary update counts the spread as noise (held out,
+            ``scripts/ablations.py``, 0.24.0: +21.3 m against the default with the mixture,
+            +9.5 m with the summary update in 0.23.1), so ``gating=False`` with
+            ``"mixture"`` is refused.
         process_noise_prior: ``"boundary-avoiding"`` or ``"none"``: the penalty q's climb
             adds to the window's likelihood (:data:`PROCESS_NOISE_PRIORS`).
         gap_end: ``"reports"`` or ``"moments"``: the prior of the first step with data after
@@ -679,7 +681,7 @@ class StateSpaceDGPT(TrackerBase):
         turn_process_noise: float = TURN_MODES["intensity"],
         mode_stay_probability: float = TURN_MODES["stay_probability"],
         summary_variance: str = "mean",
-        expert_update: str = "mixture",
+        expert_update: str | None = None,
         process_noise_prior: str = "none",
         gap_end: str = "reports",
         gap_restart_probability: float = GAP_RESTART_PROBABILITY,
@@ -726,7 +728,14 @@ class StateSpaceDGPT(TrackerBase):
         self.summary_variance = check_choice(
             "summary_variance", summary_variance, SUMMARY_VARIANCES
         )
+        if expert_update is None:
+            expert_update = "mixture" if self.gating else "summary"
         self.expert_update = check_choice("expert_update", expert_update, EXPERT_UPDATES)
+        if self.expert_update == "mixture" and not self.gating:
+            raise ValueError(
+                "expert_update='mixture' needs the association's weights (gating=True); "
+                "with gating=False use expert_update='summary' or None"
+            )
         self.process_noise_prior = check_choice(
             "process_noise_prior", process_noise_prior, PROCESS_NOISE_PRIORS
         )

@@ -736,6 +736,52 @@ def test_a_step_is_the_likelihood_weighted_mixture_of_the_two_components(associa
         np.testing.assert_allclose(estimate.var[axis], cov[0, 0] + carried, rtol=1e-12)
 
 
+def test_without_gating_each_expert_updates_with_its_unweighted_mean_and_spread():
+    """gating=False: a sensor's summary is the unweighted mean of its points, of variance
+    sigma_n^2 / k plus their spread about it (the mean squared deviation), and its expert is
+    the Kalman update of the broadcast prediction with that summary (dense_aggregate with one
+    expert), not the mixture over its points, whose mean would move with the smaller
+    variance's gain; the estimate is RBCM over the experts. The mixture update needs the
+    association's weights and is refused without them."""
+    spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0)))
+    tracker = StateSpaceDGPT(
+        aggregation="rbcm",
+        gating=False,
+        manoeuvre_intensity=0.0,
+        turn_rates=(),
+        learn_process_noise=False,
+    )
+    assert tracker.expert_update == "summary"
+    tracker.reset(spec)
+    for t in range(3):
+        tracker.update(measurement_obs(t, np.array([[2.0 * t, t], [2.0 * t + 1.0, t]]), [0, 1]))
+    # sensor 0 reports two points 6 m apart on x, sensor 1 one point
+    points = np.array([[3.0, 5.0], [9.0, 1.0], [7.0, 2.5]])
+    tracker.update(measurement_obs(3, points, [0, 0, 1]))
+    _, prior_means, prior_covs, _ = tracker.step_predictions_
+    summaries = np.array([[6.0, 3.0], [7.0, 2.5]])  # (sensor, axis)
+    spreads = np.array([[9.0, 4.0], [0.0, 0.0]])
+    noise_var = np.array([[0.5], [1.0]])  # sigma_n^2 = 1 over k points
+    for axis in range(2):
+        prior_mean, prior_cov = prior_means[0, axis], prior_covs[0, axis]
+        variances = noise_var[:, 0] + spreads[:, axis]
+        for expert in range(2):
+            mean, cov = dense_aggregate(
+                "rbcm",
+                prior_mean,
+                prior_cov,
+                summaries[expert, axis : axis + 1],
+                variances[expert : expert + 1],
+            )
+            np.testing.assert_allclose(tracker.expert_means_[axis, expert], mean, rtol=1e-10)
+            np.testing.assert_allclose(tracker.expert_covs_[axis, expert], cov, rtol=1e-10)
+        mean, cov = dense_aggregate("rbcm", prior_mean, prior_cov, summaries[:, axis], variances)
+        np.testing.assert_allclose(tracker.mean_[axis], mean, rtol=1e-10)
+        np.testing.assert_allclose(tracker.cov_[axis], cov, rtol=1e-10)
+    with pytest.raises(ValueError, match="expert_update='mixture' needs .*gating=True"):
+        StateSpaceDGPT(gating=False, expert_update="mixture")
+
+
 def test_an_experts_local_posterior_uses_only_its_own_data_and_the_broadcast_prior():
     spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0), (0.0, 20.0)))
     rng = np.random.default_rng(3)
