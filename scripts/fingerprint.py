@@ -6,8 +6,9 @@ It covers the estimates, variances and UCBs of ``dgpt-rbcm``, ``dgpt-bcm``, ``dg
 ``dgpt-poe``, ``gp`` and ``hybrid`` on five configurations (the reference and random
 paths, clutter at the detecting sensors and at every sensor, sigma_z 1 and 4), each
 episode alone and ``dgpt-rbcm``'s also in a lockstep block (one ``update_batch`` call per
-step), and the rewards, errors and observations of the batched ``DGPTrackSensors-v1``
-and ``-v2`` vector environments under seeded random actions.
+step), and the rewards, errors and observations of the batched ``DGPTrackSensors-v1``,
+``-v2``, ``DGPTrackWindow-v0`` and ``DGPTrackGating-v0`` vector environments under seeded
+random actions (the RL tasks with committed agents).
 ``--quick`` runs two seeds per configuration, no blocks and shorter environment runs (a
 different hash). One line per episode, then the total. About 40 s on one core.
 
@@ -42,7 +43,7 @@ CONFIGURATIONS = (
     ("S2", 5.0, {"noise_std": 4.0}),
 )
 TRACKERS = ("dgpt-rbcm", "dgpt-bcm", "dgpt-gpoe", "dgpt-poe", "gp", "hybrid")
-VECTOR_ENVS = ("DGPTrackSensors-v2", "DGPTrackSensors-v1")
+VECTOR_ENVS = ("DGPTrackSensors-v2", "DGPTrackSensors-v1", "DGPTrackWindow-v0", "DGPTrackGating-v0")
 
 
 def episode_digest(result) -> bytes:

@@ -6,7 +6,13 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-__all__ = ["RLEnvironment", "ENVIRONMENTS", "SENSORS_V2_TRACKER_OPTIONS"]
+__all__ = [
+    "RLEnvironment",
+    "ENVIRONMENTS",
+    "TREND_TRACKER_OPTIONS",
+    "SENSORS_V1_TRACKER_OPTIONS",
+    "SENSORS_V2_TRACKER_OPTIONS",
+]
 
 
 class RLEnvironment(NamedTuple):
@@ -24,6 +30,34 @@ class RLEnvironment(NamedTuple):
     vector_entry_point: str
     kwargs: tuple[tuple[str, object], ...] = ()
 
+
+TREND_TRACKER_OPTIONS = {
+    "delta": 0.003,
+    "mean": "linear",
+    "max_iterations": 5,
+    "anytime_ucb": False,
+    "gating": True,
+    "kernel": "se",
+    "hyperparameter_bounds": "tracking",
+    "admission_probability": 0.5,
+}
+"""Every argument of :class:`agents.dgpt.DGPT` that the window, gating and v0 sensor tasks
+do not take from their own arguments (``aggregation``, ``inputs``, ``window``,
+``gate_threshold``), with which they build their tracker, so that no later default of
+``DGPT`` moves these tasks under their committed agents: the defaults that the trend tracker
+has had since 0.18.2, with which the agents in ``models/`` were trained and evaluated. A new
+argument of ``DGPT`` must be added here (a test checks that none is missing)."""
+
+SENSORS_V1_TRACKER_OPTIONS = {
+    "aggregation": "rbcm",
+    "inputs": "tgp",
+    "gate_threshold": None,
+    **TREND_TRACKER_OPTIONS,
+}
+"""Every argument of ``DGPT`` but ``window`` (the environment's own, 3), as
+``DGPTrackSensors-v1`` builds its ``dgpt-rbcm-trend``: the registered id's arguments and
+:data:`TREND_TRACKER_OPTIONS`, so that neither the id's registration nor ``DGPT``'s
+defaults can move the task under its committed agents."""
 
 SENSORS_V2_TRACKER_OPTIONS = {
     # dgpt-bcm as 0.9.0 built it:
@@ -88,6 +122,11 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         "sensors-v1",
         "sensors woken per step",
         "agents.rl.vector:sensors_v1_vector_env",
+        (
+            ("tracker", "dgpt-rbcm-trend"),
+            ("window", 3),
+            ("tracker_options", SENSORS_V1_TRACKER_OPTIONS),
+        ),
     ),
     RLEnvironment(
         "DGPTrackSensors-v2",

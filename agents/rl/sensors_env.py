@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 from agents.dgpt import DGPT
 from agents.rl.base import TrackerInsideEnv
+from agents.rl.registration import TREND_TRACKER_OPTIONS
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["DGPTrackSensorsEnv", "filter_reports"]
@@ -118,7 +119,11 @@ class DGPTrackSensorsEnv(TrackerInsideEnv):
         **env_kwargs,
     ) -> None:
         tracker = DGPT(
-            aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
+            aggregation=aggregation,
+            inputs=inputs,
+            window=window,
+            gate_threshold=gate_threshold,
+            **TREND_TRACKER_OPTIONS,
         )
         super().__init__(tracker, error_scale, env_kwargs)
         self.n_candidates = check_integer("n_candidates", n_candidates, low=1)

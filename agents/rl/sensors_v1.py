@@ -137,7 +137,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``error_scale`` | sensing range | metres per unit of error penalty |
     | ``tracker`` | ``"dgpt-rbcm-trend"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm"`` |
     | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
-    | ``tracker_options`` | None | further keyword arguments of the tracker; ``DGPTrackSensors-v2`` fixes every argument of ``dgpt-bcm`` (``agents.rl.registration.SENSORS_V2_TRACKER_OPTIONS``): the model as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, ``expert_update="summary"``, no silence particles) and the rest as its agents were trained |
+    | ``tracker_options`` | None | further keyword arguments of the tracker, over its id's registered ones; ``DGPTrackSensors-v1`` fixes every argument of ``dgpt-rbcm-trend`` but ``window`` (``agents.rl.registration.SENSORS_V1_TRACKER_OPTIONS``), ``DGPTrackSensors-v2`` fixes every argument of ``dgpt-bcm`` (``agents.rl.registration.SENSORS_V2_TRACKER_OPTIONS``): the model as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, ``expert_update="summary"``, no silence particles) and the rest as its agents were trained. Gymnasium passes an id's fixed arguments with the user's, so another ``tracker`` with -v1 or -v2 needs its own ``tracker_options`` (None: its registered ones) |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
     """
@@ -164,7 +164,9 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
             inner_tracker = make_tracker(tracker, **options)
         except TypeError as error:
             raise ValueError(
-                f"tracker {tracker!r} takes no window argument ({error}); pass window=None"
+                f"tracker {tracker!r} does not take the arguments {sorted(options)} ({error}): "
+                "pass window=None if it takes no window, and tracker_options that it takes "
+                "(DGPTrackSensors-v1 and -v2 fix them for their own tracker)"
             ) from None
         super().__init__(inner_tracker, error_scale, env_kwargs, layout)
         self.wake_energy = check_real("wake_energy", wake_energy, low=0.0)

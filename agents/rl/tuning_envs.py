@@ -16,6 +16,7 @@ from gymnasium import spaces
 from agents.dgpt import DGPT
 from agents.rl.base import TrackerInsideEnv
 from agents.rl.features import FEATURE_HIGH, FEATURE_NAMES, tracker_features
+from agents.rl.registration import TREND_TRACKER_OPTIONS
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = ["TrackerTuningEnv", "DGPTrackWindowEnv", "DGPTrackGatingEnv", "DEFAULT_WINDOWS"]
@@ -52,7 +53,11 @@ class TrackerTuningEnv(TrackerInsideEnv, abc.ABC):
         **env_kwargs,
     ) -> None:
         tracker = DGPT(
-            aggregation=aggregation, inputs=inputs, window=window, gate_threshold=gate_threshold
+            aggregation=aggregation,
+            inputs=inputs,
+            window=window,
+            gate_threshold=gate_threshold,
+            **TREND_TRACKER_OPTIONS,
         )
         super().__init__(tracker, error_scale, env_kwargs, layout)
         self.max_window = check_integer("max_window", max_window, low=window)

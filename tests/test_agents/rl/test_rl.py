@@ -85,6 +85,25 @@ def test_arguments_are_validated(env_id, kwargs, name):
         gym.make(env_id, **kwargs)
 
 
+@pytest.mark.parametrize("env_id", RL_ENVS)
+def test_the_tracker_inside_fixes_every_argument_of_dgpt(env_id):
+    """A new argument of ``DGPT``, or a changed default, must not move these tasks under
+    their committed agents: what the environment does not set from its own arguments comes
+    from ``TREND_TRACKER_OPTIONS``, which names every other argument of ``DGPT``."""
+    import inspect
+
+    from agents.dgpt import DGPT
+    from agents.rl.registration import TREND_TRACKER_OPTIONS
+
+    arguments = set(inspect.signature(DGPT.__init__).parameters) - {"self"}
+    own = {"aggregation", "inputs", "window", "gate_threshold"}
+    assert set(TREND_TRACKER_OPTIONS) == arguments - own
+    tracker = gym.make(env_id).unwrapped.tracker
+    assert type(tracker) is DGPT
+    for name, value in TREND_TRACKER_OPTIONS.items():
+        assert getattr(tracker, name) == value, name
+
+
 @pytest.mark.parametrize("env_id", ["DGPTrackWindow-v0", "DGPTrackGating-v0"])
 def test_a_per_episode_layout_comes_from_the_reset_seed(env_id):
     """layout="per_episode": seed s's layout is DGPTrack-v0's with layout_seed=s, another

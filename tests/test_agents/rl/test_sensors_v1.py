@@ -177,7 +177,8 @@ def test_v2_fixes_every_argument_of_its_tracker():
     ("kwargs", "message"),
     [
         ({"tracker": "no-such-tracker"}, "tracker must be one of"),
-        ({"tracker": "imm-pda"}, "takes no window argument"),
+        ({"tracker": "imm-pda", "tracker_options": None}, "does not take the arguments"),
+        ({"tracker": "dgpt-rbcm"}, "does not take the arguments"),
         ({"window": 0}, "window must be an integer >= 1"),
     ],
 )
@@ -289,3 +290,19 @@ def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds_and_layouts(short
     test = stats.ttest_ind(trained_returns, random_returns, equal_var=False, alternative="greater")
     assert test.pvalue < 1e-3, (np.mean(trained_returns), np.mean(random_returns), test)
     assert np.mean([e["per_step"] for e in trained]) < np.mean([e["per_step"] for e in random])
+
+
+def test_v1_fixes_every_argument_of_its_tracker():
+    """As v2: a new argument of ``DGPT``, a changed default or a changed registration of
+    ``dgpt-rbcm-trend`` must not move v1 under its committed agents."""
+    import inspect
+
+    from agents.dgpt import DGPT
+    from agents.rl.registration import SENSORS_V1_TRACKER_OPTIONS
+
+    arguments = set(inspect.signature(DGPT.__init__).parameters) - {"self"}
+    assert set(SENSORS_V1_TRACKER_OPTIONS) == arguments - {"window"}
+    tracker = gym.make(ENV_ID).unwrapped.tracker
+    assert type(tracker) is DGPT and tracker.window == 3
+    for name, value in SENSORS_V1_TRACKER_OPTIONS.items():
+        assert getattr(tracker, name) == value, name
