@@ -45,8 +45,10 @@ TREND_TRACKER_OPTIONS = {
 do not take from their own arguments (``aggregation``, ``inputs``, ``window``,
 ``gate_threshold``), with which they build their tracker, so that no later default of
 ``DGPT`` moves these tasks under their committed agents: the defaults that the trend tracker
-has had since 0.18.2, with which the agents in ``models/`` were trained and evaluated. A new
-argument of ``DGPT`` must be added here (a test checks that none is missing)."""
+has had since 0.18.2 (its code has not changed since), with which the window and gating
+agents in ``models/`` were trained and every committed agent's table was last evaluated
+(the ``DGPTrackSensors-v1`` agents were trained with 0.5.0's). A new argument of ``DGPT``
+must be added here (a test checks that none is missing)."""
 
 SENSORS_V1_TRACKER_OPTIONS = {
     "aggregation": "rbcm",
