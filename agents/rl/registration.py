@@ -44,11 +44,10 @@ TREND_TRACKER_OPTIONS = {
 """Every argument of :class:`agents.dgpt.DGPT` that the window, gating and v0 sensor tasks
 do not take from their own arguments (``aggregation``, ``inputs``, ``window``,
 ``gate_threshold``), with which they build their tracker, so that no later default of
-``DGPT`` moves these tasks under their committed agents: the defaults that the trend tracker
-has had since 0.18.2 (its code has not changed since), with which the window and gating
-agents in ``models/`` were trained and every committed agent's table was last evaluated
-(the ``DGPTrackSensors-v1`` agents were trained with 0.5.0's). A new argument of ``DGPT``
-must be added here (a test checks that none is missing)."""
+``DGPT`` moves these tasks under the agents committed for window and gating (v0 has none):
+``DGPT``'s defaults, unchanged since 0.5.0, with which those agents were trained and
+evaluated. A new argument of ``DGPT`` must be added here (a test checks that none is
+missing; the values are guarded by ``scripts/fingerprint.py``'s lines of the tasks)."""
 
 SENSORS_V1_TRACKER_OPTIONS = {
     "aggregation": "rbcm",

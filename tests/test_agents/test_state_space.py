@@ -740,8 +740,8 @@ def test_without_gating_each_expert_updates_with_its_unweighted_mean_and_spread(
     """gating=False: a sensor's summary is the unweighted mean of its points, of variance
     sigma_n^2 / k plus their spread about it (the mean squared deviation), and its expert is
     the Kalman update of the broadcast prediction with that summary (dense_aggregate with one
-    expert), not the mixture over its points, whose mean would move with the smaller
-    variance's gain; the estimate is RBCM over the experts. The mixture update needs the
+    expert), not the mixture over its points, whose mean would move by the gain
+    p / (p + r) instead of p / (p + r + spread); the estimate is RBCM over the experts. The mixture update needs the
     association's weights and is refused without them."""
     spec = problem_spec(sensor_positions=((0.0, 0.0), (20.0, 0.0)))
     tracker = StateSpaceDGPT(
