@@ -72,6 +72,14 @@ FAULTS = (
         "if False:",
     ),
     Fault(
+        "no-gating-mixture-update",
+        "without gating, the state-space trackers' experts update with the mixture over their "
+        "sensors' equally weighted points instead of with the unweighted mean and its spread",
+        "agents/state_space_dgpt.py",
+        'if self.expert_update == "mixture":',
+        'if self.expert_update == "mixture" or not self.gating:',
+    ),
+    Fault(
         "trend-experts-return-prior",
         "every expert of the `-trend` and `-paper` trackers returns its prior mean "
         "(the residual GP's mean 0)",
