@@ -631,8 +631,8 @@ class StateSpaceDGPT(TrackerBase):
             mixture is the posterior only with the association's weights: with equal ones
             its mean moves the whole Kalman gain toward the unweighted mean however spread
             the points are, where the summary update counts the spread as noise (held out,
-            ``scripts/ablations.py``, 0.24.0: +21.3 m against the default with the mixture,
-            +9.5 m with the summary update in 0.23.1), so ``gating=False`` with
+            ``scripts/ablations.py``: +21.3 m against the default with the mixture in 0.24.0,
+            +9.5 m with the summary update in 0.24.2), so ``gating=False`` with
             ``"mixture"`` is refused.
         process_noise_prior: ``"boundary-avoiding"`` or ``"none"``: the penalty q's climb
             adds to the window's likelihood (:data:`PROCESS_NOISE_PRIORS`).
