@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 __all__ = [
+    "FixedTrackerOptions",
     "RLEnvironment",
     "ENVIRONMENTS",
     "TREND_TRACKER_OPTIONS",
@@ -29,6 +30,19 @@ class RLEnvironment(NamedTuple):
     per_step: str
     vector_entry_point: str
     kwargs: tuple[tuple[str, object], ...] = ()
+
+
+class FixedTrackerOptions(dict):
+    """``tracker_options`` that an environment id fixes for the tracker it names
+    (``tracker``). Gymnasium passes an id's fixed arguments with the user's, so a user who
+    picks another ``tracker`` would silently build it with options meant for this one (v2's
+    ``aggregation="bcm"`` for ``tracker="dgpt-rbcm"``); the environment refuses that
+    instead (:class:`agents.rl.sensors_v1.DGPTrackSensorsV1Env`). Built like a dict (what
+    ``dataclasses.asdict``, which ``EnvSpec.to_json`` uses, does), it fixes no tracker."""
+
+    def __init__(self, options=(), /, tracker: str | None = None) -> None:
+        super().__init__(options)
+        self.tracker = tracker
 
 
 TREND_TRACKER_OPTIONS = {
@@ -126,7 +140,10 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         (
             ("tracker", "dgpt-rbcm-trend"),
             ("window", 3),
-            ("tracker_options", SENSORS_V1_TRACKER_OPTIONS),
+            (
+                "tracker_options",
+                FixedTrackerOptions(SENSORS_V1_TRACKER_OPTIONS, tracker="dgpt-rbcm-trend"),
+            ),
         ),
     ),
     RLEnvironment(
@@ -138,7 +155,10 @@ ENVIRONMENTS: tuple[RLEnvironment, ...] = (
         (
             ("tracker", "dgpt-bcm"),
             ("window", 20),
-            ("tracker_options", SENSORS_V2_TRACKER_OPTIONS),
+            (
+                "tracker_options",
+                FixedTrackerOptions(SENSORS_V2_TRACKER_OPTIONS, tracker="dgpt-bcm"),
+            ),
         ),
     ),
 )

@@ -8,8 +8,9 @@ import numpy as np
 from gymnasium import spaces
 
 from agents.rl.base import TrackerInsideEnv
+from agents.rl.registration import FixedTrackerOptions
 from agents.rl.sensors_env import filter_reports
-from dgpt_gym.registry import make_tracker
+from dgpt_gym.registry import make_tracker, tracker_spec
 from dgpt_gym.validation import check_integer, check_real
 
 __all__ = [
@@ -137,7 +138,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
     | ``error_scale`` | sensing range | metres per unit of error penalty |
     | ``tracker`` | ``"dgpt-rbcm-trend"`` | the tracker inside: a registered id (``dgpt_gym.tracker_ids()``) or ``"package.module:ClassName"``, as ``dgpt_gym.make_tracker`` takes it; ``DGPTrackSensors-v2`` is this task with ``"dgpt-bcm"`` |
     | ``window`` | 3 | the tracker's ``window`` argument (None: the tracker's own default) |
-    | ``tracker_options`` | None | further keyword arguments of the tracker, over its id's registered ones; ``DGPTrackSensors-v1`` fixes every argument of ``dgpt-rbcm-trend`` but ``window`` (``agents.rl.registration.SENSORS_V1_TRACKER_OPTIONS``), ``DGPTrackSensors-v2`` fixes every argument of ``dgpt-bcm`` (``agents.rl.registration.SENSORS_V2_TRACKER_OPTIONS``): the model as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, ``expert_update="summary"``, no silence particles) and the rest as its agents were trained. Gymnasium passes an id's fixed arguments with the user's, so another ``tracker`` with -v1 or -v2 needs its own ``tracker_options`` (None: its registered ones) |
+    | ``tracker_options`` | None | further keyword arguments of the tracker, over its id's registered ones; ``DGPTrackSensors-v1`` fixes every argument of ``dgpt-rbcm-trend`` but ``window`` (``agents.rl.registration.SENSORS_V1_TRACKER_OPTIONS``), ``DGPTrackSensors-v2`` fixes every argument of ``dgpt-bcm`` (``agents.rl.registration.SENSORS_V2_TRACKER_OPTIONS``): the model as 0.9.0 built it (``association="local"``, manoeuvre probability 0.5, no turn modes, ``summary_variance="point"``, ``expert_update="summary"``, no silence particles) and the rest as its agents were trained. Gymnasium passes an id's fixed arguments with the user's, so another ``tracker`` with -v1 or -v2 needs its own ``tracker_options`` (None: its registered ones), or is refused |
     | ``layout`` | ``"per_episode"`` | ``"per_episode"`` (from the reset seed) or ``"fixed"`` (``layout_seed``) |
     | ``**env_kwargs`` | | ``DGPTrack-v0`` arguments; ``trajectory`` defaults to ``"random"`` |
     """
@@ -158,6 +159,15 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         **env_kwargs,
     ) -> None:
         env_kwargs.setdefault("trajectory", "random")
+        tracker_spec(tracker)  # an unknown id is named before the options
+        fixed_for = (
+            tracker_options.tracker if isinstance(tracker_options, FixedTrackerOptions) else None
+        )
+        if fixed_for not in (None, tracker):
+            raise ValueError(
+                f"this environment id fixes tracker_options for tracker {fixed_for!r}; with "
+                f"tracker={tracker!r} pass tracker_options too (None: its registered arguments)"
+            )
         options = {} if window is None else {"window": check_integer("window", window, low=1)}
         options.update(tracker_options or {})
         try:

@@ -178,13 +178,24 @@ def test_v2_fixes_every_argument_of_its_tracker():
     [
         ({"tracker": "no-such-tracker"}, "tracker must be one of"),
         ({"tracker": "imm-pda", "tracker_options": None}, "does not take the arguments"),
-        ({"tracker": "dgpt-rbcm"}, "does not take the arguments"),
+        ({"tracker": "dgpt-gpoe-trend"}, "fixes tracker_options for tracker 'dgpt-rbcm-trend'"),
         ({"window": 0}, "window must be an integer >= 1"),
     ],
 )
 def test_bad_tracker_arguments_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         gym.make(ENV_ID, **kwargs)
+
+
+def test_another_tracker_does_not_take_the_options_an_id_fixes_for_its_own():
+    """v2 fixes aggregation "bcm" for its dgpt-bcm: asked for dgpt-rbcm it refuses rather
+    than build BCM under that name; with the user's own options (None: the id's registered
+    ones) it builds what was asked for."""
+    with pytest.raises(ValueError, match="fixes tracker_options for tracker 'dgpt-bcm'"):
+        gym.make("DGPTrackSensors-v2", tracker="dgpt-rbcm")
+    tracker = gym.make("DGPTrackSensors-v2", tracker="dgpt-rbcm", tracker_options=None)
+    assert tracker.unwrapped.tracker.aggregation == "rbcm"
+    assert gym.make(ENV_ID, tracker="dgpt-rbcm-trend").unwrapped.tracker.aggregation == "rbcm"
 
 
 @pytest.mark.parametrize("action", [-1, len(WAKE_COUNTS), 1.5, "2", np.array([1, 2])])
