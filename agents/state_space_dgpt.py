@@ -32,8 +32,9 @@ mode or a turn mode, each with its own prediction. Each step t:
 3. **Experts and aggregation**, per component: each sensor with a summary updates the
    prediction with its own measurements alone: its local posterior is the moments of the
    mixture over which of them is the target's, with the weights of step 2 (the PDA update;
-   :data:`EXPERT_UPDATES`; without gating, the update with its summary); the local posteriors are aggregated (PoE / GPoE / BCM / RBCM,
-   eqs. (8)-(20), on the state; :func:`agents.state_space.fused_update`).
+   :data:`EXPERT_UPDATES`; without gating, the update with its summary); the local
+   posteriors are aggregated (PoE / GPoE / BCM / RBCM, eqs. (8)-(20), on the state;
+   :func:`agents.state_space.fused_update`).
 4. **Mixture**: the components' aggregates are weighted by prior probability (with turn
    modes, times the mode's predicted probability) times the exact likelihood of their
    summaries (:func:`agents.state_space.step_log_likelihood`, a sum over experts like
@@ -196,9 +197,9 @@ summary variance (:data:`SUMMARY_VARIANCES`); ``"mixture"``, the moments of the 
 which of its measurements is the target's (the PDA update), through the pseudo-measurement
 of :func:`agents.state_space.mixture_summaries`. The first is narrower: its weights come
 from the prediction it then updates. Either way the hypotheses are weighed by the
-summaries' likelihood. ``"mixture"`` is the default with gating since 0.24.0, chosen on training seeds
-1000-1019 (S1-S4, both path modes; ``python scripts/model_study.py --first-seed 1000
---seeds 20 --noise-std 4 --clutter-rates 5 --candidates dgpt-rbcm-summary
+summaries' likelihood. ``"mixture"`` is the default with gating since 0.24.0, chosen on
+training seeds 1000-1019 (S1-S4, both path modes; ``python scripts/model_study.py
+--first-seed 1000 --seeds 20 --noise-std 4 --clutter-rates 5 --candidates dgpt-rbcm-summary
 dgpt-rbcm-mixture --paired-against dgpt-rbcm-summary``, and the same at sigma_z 1 and 2):
 DGPT-RBCM's 3-sigma coverage on detected steps went from 99.23 to 99.44 % at sigma_z 4,
 clutter 5 (each of the 8 cells up; S3's reference path 99.03 to 99.62 %), 99.49 to 99.56 %
