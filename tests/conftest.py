@@ -1,5 +1,6 @@
 """Shared fixtures and helpers."""
 
+import inspect
 import itertools
 
 import gymnasium as gym
@@ -145,6 +146,20 @@ def step_vec_envs_alike(venv, reference, steps: int, rng) -> int:
                 )
         dones += int(got[2].sum())
     return dones
+
+
+def assert_fixes_every_argument(tracker, options: dict, own: set) -> None:
+    """An RL environment's ``tracker`` is built with ``options``, which name every argument
+    of its class but the environment's ``own``; a ``manoeuvre_*`` option is read from the
+    tracker's ``manoeuvre``. A new argument of the class fails the first assertion, an
+    option the environment does not pass the second."""
+    arguments = set(inspect.signature(type(tracker).__init__).parameters) - {"self"}
+    assert set(options) == arguments - own
+    for name, value in options.items():
+        if name.startswith("manoeuvre_"):
+            assert getattr(tracker.manoeuvre, name.removeprefix("manoeuvre_")) == value, name
+        else:
+            assert getattr(tracker, name) == value, name
 
 
 def brute_force_posterior(prior_mean, prior_var, points, model, sensors=None, region=None):

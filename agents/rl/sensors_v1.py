@@ -175,8 +175,7 @@ class DGPTrackSensorsV1Env(TrackerInsideEnv):
         except TypeError as error:
             raise ValueError(
                 f"tracker {tracker!r} does not take the arguments {sorted(options)} ({error}): "
-                "pass window=None if it takes no window, and tracker_options that it takes "
-                "(DGPTrackSensors-v1 and -v2 fix them for their own tracker)"
+                "pass window=None if it takes no window, and tracker_options that it takes"
             ) from None
         super().__init__(inner_tracker, error_scale, env_kwargs, layout)
         self.wake_energy = check_real("wake_energy", wake_energy, low=0.0)

@@ -8,6 +8,7 @@ import tempfile
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_fixes_every_argument
 from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -90,18 +91,13 @@ def test_the_tracker_inside_fixes_every_argument_of_dgpt(env_id):
     """A new argument of ``DGPT``, or a changed default, must not move these tasks under
     their committed agents: what the environment does not set from its own arguments comes
     from ``TREND_TRACKER_OPTIONS``, which names every other argument of ``DGPT``."""
-    import inspect
-
     from agents.dgpt import DGPT
     from agents.rl.registration import TREND_TRACKER_OPTIONS
 
-    arguments = set(inspect.signature(DGPT.__init__).parameters) - {"self"}
-    own = {"aggregation", "inputs", "window", "gate_threshold"}
-    assert set(TREND_TRACKER_OPTIONS) == arguments - own
     tracker = gym.make(env_id).unwrapped.tracker
     assert type(tracker) is DGPT
-    for name, value in TREND_TRACKER_OPTIONS.items():
-        assert getattr(tracker, name) == value, name
+    own = {"aggregation", "inputs", "window", "gate_threshold"}
+    assert_fixes_every_argument(tracker, TREND_TRACKER_OPTIONS, own)
 
 
 @pytest.mark.parametrize("env_id", ["DGPTrackWindow-v0", "DGPTrackGating-v0"])

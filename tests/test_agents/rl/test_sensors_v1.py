@@ -5,6 +5,7 @@ re-acquisition of a lost track."""
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_fixes_every_argument
 from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 from scipy import stats
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -158,19 +159,12 @@ def test_v2_fixes_every_argument_of_its_tracker():
     """A new argument of ``StateSpaceDGPT``, or a changed default, must not move v2 under
     the agents committed for it: v2 passes every argument but ``window`` (its own,
     fixed at 20) explicitly."""
-    import inspect
-
     from agents.rl.registration import SENSORS_V2_TRACKER_OPTIONS
     from agents.state_space_dgpt import StateSpaceDGPT
 
-    arguments = set(inspect.signature(StateSpaceDGPT.__init__).parameters) - {"self"}
-    assert set(SENSORS_V2_TRACKER_OPTIONS) == arguments - {"window"}
     tracker = gym.make("DGPTrackSensors-v2").unwrapped.tracker
-    for name, value in SENSORS_V2_TRACKER_OPTIONS.items():
-        if name.startswith("manoeuvre_"):
-            assert getattr(tracker.manoeuvre, name.removeprefix("manoeuvre_")) == value
-        else:
-            assert getattr(tracker, name) == value, name
+    assert type(tracker) is StateSpaceDGPT and tracker.window == 20
+    assert_fixes_every_argument(tracker, SENSORS_V2_TRACKER_OPTIONS, {"window"})
 
 
 @pytest.mark.parametrize(
@@ -306,14 +300,9 @@ def test_short_ppo_run_beats_a_random_policy_on_held_out_seeds_and_layouts(short
 def test_v1_fixes_every_argument_of_its_tracker():
     """As v2: a new argument of ``DGPT``, a changed default or a changed registration of
     ``dgpt-rbcm-trend`` must not move v1 under its committed agents."""
-    import inspect
-
     from agents.dgpt import DGPT
     from agents.rl.registration import SENSORS_V1_TRACKER_OPTIONS
 
-    arguments = set(inspect.signature(DGPT.__init__).parameters) - {"self"}
-    assert set(SENSORS_V1_TRACKER_OPTIONS) == arguments - {"window"}
     tracker = gym.make(ENV_ID).unwrapped.tracker
     assert type(tracker) is DGPT and tracker.window == 3
-    for name, value in SENSORS_V1_TRACKER_OPTIONS.items():
-        assert getattr(tracker, name) == value, name
+    assert_fixes_every_argument(tracker, SENSORS_V1_TRACKER_OPTIONS, {"window"})
