@@ -20,11 +20,22 @@ from dgpt_gym.rendering import Renderer
 from dgpt_gym.scenarios import Scenario, Trajectory, get_scenario
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
-__all__ = ["DGPTrackEnv", "vector_env", "TRAJECTORY_MODES", "OVERFLOW_PROBABILITY"]
+__all__ = [
+    "DGPTrackEnv",
+    "vector_env",
+    "TRAJECTORY_MODES",
+    "LAYOUT_MODES",
+    "OVERFLOW_PROBABILITY",
+]
 
 logger = logging.getLogger(__name__)
 
 TRAJECTORY_MODES = ("fixed", "random")
+LAYOUT_MODES = ("fixed", "per_episode")
+"""Where an episode's sensor layout comes from, for the tools that run many episodes (the
+RL environments, :class:`dgpt_gym.benchmark.sweep.Grid`): ``"fixed"``, the env's
+``layout_seed`` in every episode; ``"per_episode"``, the episode's seed, so that evaluation
+seeds 0-99 meet layouts that training seeds (1000 and up) never showed."""
 RESET_OPTIONS = ("layout_seed",)
 """The keys ``reset(options=...)`` accepts."""
 OVERFLOW_PROBABILITY = 1e-9

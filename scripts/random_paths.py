@@ -56,8 +56,9 @@ RESAMPLES = 2000
 """Bootstrap resamples of each ratio's interval."""
 
 
-def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
-    """The two grids, by path mode: ``trackers`` on S1-S4 x clutter 1, 5 at sigma_z 1."""
+def path_grids(trackers, runs: int, first_seed: int, layout: str = "fixed") -> dict[str, Grid]:
+    """The two grids, by path mode: ``trackers`` on S1-S4 x clutter 1, 5 at sigma_z 1, in
+    the environment's layout or, with ``layout="per_episode"``, in layout s for seed s."""
     grid = Grid(
         trackers=tuple(trackers),
         scenarios=SCENARIOS,
@@ -65,6 +66,7 @@ def path_grids(trackers, runs: int, first_seed: int) -> dict[str, Grid]:
         clutter_rates=CLUTTER_RATES,
         runs=runs,
         first_seed=first_seed,
+        layout=layout,
     )
     return on_every_path_mode(grid)
 

@@ -7,17 +7,17 @@ import abc
 
 import gymnasium as gym
 
-from dgpt_gym.env import DGPTrackEnv
+from dgpt_gym.env import LAYOUT_MODES, DGPTrackEnv
 from dgpt_gym.tracker import TrackerBase
 from dgpt_gym.validation import check_choice, check_real
 
 __all__ = ["TrackerInsideEnv", "LAYOUTS"]
 
-LAYOUTS = ("fixed", "per_episode")
+LAYOUTS = LAYOUT_MODES
 """Where an RL environment's sensor layout comes from: ``"fixed"``, the inner env's
 ``layout_seed`` in every episode; ``"per_episode"``, the reset seed, so that evaluation
 seeds 0-99 meet layouts that training seeds (1000 and up, or the training environments'
-10000 and up) never showed."""
+10000 and up) never showed (:data:`dgpt_gym.env.LAYOUT_MODES`)."""
 
 
 class TrackerInsideEnv(gym.Env, abc.ABC):

@@ -36,7 +36,7 @@ from dgpt_gym.benchmark.episodes import (
 from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRACKERS
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
-from dgpt_gym.env import TRAJECTORY_MODES
+from dgpt_gym.env import LAYOUT_MODES, TRAJECTORY_MODES
 from dgpt_gym.registry import TrackerSpec, tracker_ids, tracker_spec
 from dgpt_gym.scenarios import get_scenario
 from dgpt_gym.validation import check_choice, check_integer, check_real
@@ -140,6 +140,7 @@ class Grid:
     first_seed: int = 0
     tuned_windows: bool = True
     trajectory: str = "fixed"
+    layout: str = "fixed"
 
     def __post_init__(self) -> None:
         for name in ("trackers", "scenarios", "noise_levels", "clutter_rates"):
@@ -159,6 +160,7 @@ class Grid:
         check_integer("runs", self.runs, low=1)
         check_integer("first_seed", self.first_seed, low=0)
         check_choice("trajectory", self.trajectory, TRAJECTORY_MODES)
+        check_choice("layout", self.layout, LAYOUT_MODES)
 
     def units(self) -> list[RunUnit]:
         units = []
@@ -184,7 +186,12 @@ class Grid:
                             kwargs.update(tuned_kwargs(base, scenario))
                         kwargs.update(overrides)
                         for seed in range(self.first_seed, self.first_seed + self.runs):
-                            units.append(RunUnit(name, spec.entry_point, kwargs, env_kwargs, seed))
+                            run_env_kwargs = env_kwargs
+                            if self.layout == "per_episode":
+                                run_env_kwargs = {**env_kwargs, "layout_seed": seed}
+                            units.append(
+                                RunUnit(name, spec.entry_point, kwargs, run_env_kwargs, seed)
+                            )
         return units
 
 
@@ -275,9 +282,9 @@ def episode_results(units: Sequence[RunUnit]) -> list[EpisodeResult]:
 
 
 def run_block(units: Sequence[RunUnit]) -> list[dict]:
-    """Run the episodes of ``units``, which share tracker and environment settings
-    (:func:`make_blocks`), in lockstep (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never
-    raises. One outcome per unit as in :func:`run_unit`; ``runtime_s`` is the block's wall
+    """Run the episodes of ``units``, which share tracker and environment settings but
+    their seeds and layouts (:func:`make_blocks`), in lockstep
+    (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never raises. One outcome per unit as in :func:`run_unit`; ``runtime_s`` is the block's wall
     time divided by its size. If the block raises, each unit is run alone, so one failing
     run is recorded as failed and the others as they would be anyway (a run's numbers do
     not depend on its block)."""
@@ -285,7 +292,10 @@ def run_block(units: Sequence[RunUnit]) -> list[dict]:
     started = time.perf_counter()
     try:
         if any(_block_key(unit) != _block_key(units[0]) for unit in units):
-            raise ValueError("a block's units must share tracker and environment settings")
+            raise ValueError(
+                "a block's units must share tracker and environment settings (all but the "
+                "seed and layout_seed)"
+            )
         metrics = [result.metrics() for result in episode_results(units)]
     except Exception as exception:  # a failed run is recorded, the sweep goes on
         if len(units) > 1:
@@ -301,14 +311,17 @@ def _outcome(status: str, metrics: dict | None, error: str | None, runtime: floa
 
 
 def _block_key(unit: RunUnit) -> str:
+    """What the runs of a block share: everything but the seed and the sensor layout (each
+    episode is reset with its own environment and tracker, so layouts may differ)."""
+    env_kwargs = {key: value for key, value in unit.env_kwargs.items() if key != "layout_seed"}
     return json.dumps(
-        [unit.tracker, unit.entry_point, unit.tracker_kwargs, unit.env_kwargs], sort_keys=True
+        [unit.tracker, unit.entry_point, unit.tracker_kwargs, env_kwargs], sort_keys=True
     )
 
 
 def make_blocks(units: Sequence[RunUnit], batch_size: int) -> list[tuple[RunUnit, ...]]:
     """Split ``units`` into blocks of at most ``batch_size`` runs of one tracker on one cell
-    (same settings, different seeds), keeping their order; blocks run in lockstep."""
+    (same settings, different seeds and perhaps layouts), keeping their order; blocks run in lockstep."""
     check_integer("batch_size", batch_size, low=1)
     by_setting: dict[str, list[RunUnit]] = {}
     for unit in units:

@@ -23,6 +23,7 @@ from dgpt_gym.benchmark.store import DATABASE_NAME, ResultsStore, run_key
 from dgpt_gym.benchmark.sweep import (
     Grid,
     Variant,
+    make_blocks,
     on_every_path_mode,
     run_sweep,
     stored_metrics,
@@ -245,6 +246,30 @@ def test_a_random_path_grid_runs_random_paths_and_keeps_the_fixed_grids_keys(tmp
     both = on_every_path_mode(Grid(**cell, trajectory="random"))
     assert [unit.key for unit in both["fixed"].units()] == [fixed.key]
     assert [unit.key for unit in both["random"].units()] == [random.key]
+
+
+@pytest.mark.parametrize("tracker", ["dgpt-rbcm", "dgpt-rbcm-trend", "hybrid"])
+def test_per_episode_layouts_run_seed_s_in_layout_s_in_one_block_as_each_alone(tmp_path, tracker):
+    """With ``layout="per_episode"`` the run of seed s is the episode of ``layout_seed=s``;
+    the three runs share one lockstep block (one tracker, one cell) although their layouts
+    differ, and each equals its episode run alone. The default grid's keys do not name the
+    layout."""
+    cell = dict(trackers=(tracker,), scenarios=("S1",), clutter_rates=(5.0,), runs=3)
+    units = Grid(**cell, layout="per_episode").units()
+    assert [unit.env_kwargs["layout_seed"] for unit in units] == [0, 1, 2]
+    assert "layout_seed" not in Grid(**cell).units()[0].env_kwargs
+    assert len(make_blocks(units, batch_size=50)) == 1
+    run_sweep([Grid(**cell, layout="per_episode")], tmp_path, workers=1, progress=False)
+    stored = deterministic_metrics_by_key(tmp_path)
+    for unit in units:
+        env = gym.make("DGPTrack-v0", scenario="S1", clutter_rate=5.0, layout_seed=unit.seed)
+        alone = run_episode(env, make_tracker(tracker, **tuned_kwargs(tracker, "S1")), unit.seed)
+        expected = {k: v for k, v in alone.metrics().items() if k not in DETERMINISTIC}
+        assert json.dumps(stored[unit.key], sort_keys=True) == json.dumps(expected, sort_keys=True)
+    layouts = [stored[unit.key]["rmse_2d"] for unit in units]
+    assert len(set(layouts)) == 3  # another layout, another episode
+    with pytest.raises(ValueError, match=r"layout must be one of \['fixed', 'per_episode'\]"):
+        Grid(**cell, layout="random")
 
 
 def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path):
