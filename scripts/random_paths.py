@@ -21,8 +21,15 @@ The runs go through the evaluation's results store (``--out``, resumable, each r
 as it finishes); ``--out results/paper`` reuses the ``--paper`` grid's reference-path runs
 of the same version, which are the same runs.
 
+Every setting was chosen in the environment's one sensor layout (``layout_seed=0``).
+``--layout per_episode`` asks whether the results hold in layouts no setting saw: both
+path modes again with the run of seed s in layout s (:class:`Grid`'s ``layout``), on the
+same paths, and the same tables with layout 0 in place of the reference paths (its runs
+read from the store as they are; the ratio's interval resamples the seeds together).
+
     python scripts/random_paths.py --report docs/random_paths.md
     python scripts/random_paths.py --trackers dgpt-rbcm imm-pda --runs 10
+    python scripts/random_paths.py --layout per_episode --report docs/random_layouts.md
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy import stats
@@ -43,7 +51,14 @@ from dgpt_gym.benchmark.episodes import (  # noqa: E402
     root_mean_square,
     signed_interval,
 )
-from dgpt_gym.benchmark.sweep import Grid, on_every_path_mode, sweep_metrics  # noqa: E402
+from dgpt_gym.benchmark.store import ResultsStore  # noqa: E402
+from dgpt_gym.benchmark.sweep import (  # noqa: E402
+    Grid,
+    on_every_path_mode,
+    stored_metrics,
+    sweep_metrics,
+)
+from dgpt_gym.env import LAYOUT_MODES  # noqa: E402
 
 TRACKERS = ("gp", "dgpt-rbcm", "dgpt-gpoe", "hybrid", "pda", "imm-pda", "cpf", "clairvoyant")
 REFERENCE = "dgpt-rbcm"
@@ -71,28 +86,53 @@ def path_grids(trackers, runs: int, first_seed: int, layout: str = "fixed") -> d
     return on_every_path_mode(grid)
 
 
-def ratio_interval(fixed, random, seed: int = 0) -> tuple[float, float, float]:
-    """RMS(``random``) / RMS(``fixed``) and its 95 % percentile-bootstrap interval, the
-    episodes of each mode resampled on their own (the two modes' paths differ, so seeds do
-    not pair them)."""
+def ratio_interval(base, other, seed: int = 0, paired: bool = False) -> tuple[float, float, float]:
+    """RMS(``other``) / RMS(``base``) and its 95 % percentile-bootstrap interval. Unpaired,
+    the episodes of each condition are resampled on their own (a random path and the
+    reference path of a seed differ, so seeds do not pair them); ``paired``, the seeds are
+    resampled together (the run of seed s in layout s and in layout 0 share their path)."""
 
     def ratio(a, b, axis=-1):
         return root_mean_square(b, axis) / root_mean_square(a, axis)
 
     result = stats.bootstrap(
-        (np.asarray(fixed, float), np.asarray(random, float)),
+        (np.asarray(base, float), np.asarray(other, float)),
         ratio,
         n_resamples=RESAMPLES,
         method="percentile",
         vectorized=True,
+        paired=paired,
         random_state=np.random.default_rng(seed),  # scipy >= 1.10 (rng= from 1.15)
     )
     interval = result.confidence_interval
-    return float(ratio(fixed, random)), float(interval.low), float(interval.high)
+    return float(ratio(base, other)), float(interval.low), float(interval.high)
 
 
-def report(fixed: dict, random: dict, trackers) -> str:
-    """The Markdown tables of the module docstring from the episodes of both modes."""
+class Comparison(NamedTuple):
+    """What :func:`report` compares: the runs of ``other`` against those of ``base``
+    (names as they read in the headings), whether seeds pair them, and the ratio above
+    which a cell is bold (None: none is)."""
+
+    base: str
+    other: str
+    paired: bool
+    goal: float | None
+
+
+PATH_MODES = Comparison("reference paths", "random paths", paired=False, goal=GOAL_RATIO)
+"""Issue 12's goal 4: random paths against the reference paths, in layout 0."""
+
+
+def layouts_on(paths: str) -> Comparison:
+    """Unseen layouts against layout 0 on ``paths`` ("reference paths" or "random
+    paths"): seed s in layout s and in layout 0 runs the same path."""
+    return Comparison(f"layout 0, {paths}", f"unseen layouts, {paths}", paired=True, goal=None)
+
+
+def report(base: dict, other: dict, trackers, comparison: Comparison = PATH_MODES) -> str:
+    """The Markdown tables of the module docstring from the episodes of both conditions:
+    ``other``'s RMSE (``base``'s beside it), their ratio, and on ``other`` the paired
+    difference to the reference tracker and the calibration."""
     cells = [(s, c) for s in SCENARIOS for c in CLUTTER_RATES]
     names = [f"{scenario} c{int(clutter)}" for scenario, clutter in cells]
     header = "| tracker | " + " | ".join(names) + " |\n|---|" + "---|" * len(cells)
@@ -106,29 +146,27 @@ def report(fixed: dict, random: dict, trackers) -> str:
     for tracker in trackers:
         ratio_cells, rmse_cells, paired_cells, calibration_cells = [], [], [], []
         for scenario, clutter in cells:
-            on_fixed = column(fixed, tracker, scenario, clutter, "rmse_2d")
-            on_random = column(random, tracker, scenario, clutter, "rmse_2d")
-            value, low, high = ratio_interval(on_fixed, on_random)
-            bold = "**" if low > GOAL_RATIO else ""
+            on_base = column(base, tracker, scenario, clutter, "rmse_2d")
+            on_other = column(other, tracker, scenario, clutter, "rmse_2d")
+            value, low, high = ratio_interval(on_base, on_other, paired=comparison.paired)
+            bold = "**" if comparison.goal is not None and low > comparison.goal else ""
             ratio_cells.append(f"{bold}{value:.2f}{bold} [{low:.2f}, {high:.2f}]")
-            rmse_cells.append(
-                f"{root_mean_square(on_random):.2f} ({root_mean_square(on_fixed):.2f})"
-            )
+            rmse_cells.append(f"{root_mean_square(on_other):.2f} ({root_mean_square(on_base):.2f})")
             if tracker == REFERENCE or REFERENCE not in trackers:
                 paired_cells.append("-")
             else:
-                difference = on_random - column(random, REFERENCE, scenario, clutter, "rmse_2d")
+                difference = on_other - column(other, REFERENCE, scenario, clutter, "rmse_2d")
                 paired_cells.append(
                     signed_interval(np.mean(difference), interval_half_width(difference))
                 )
             coverage = [
                 100
                 * np.nanmean(
-                    column(random, tracker, scenario, clutter, f"coverage_3sigma_{a}_detected")
+                    column(other, tracker, scenario, clutter, f"coverage_3sigma_{a}_detected")
                 )
                 for a in "xy"
             ]
-            nees = np.nanmedian(column(random, tracker, scenario, clutter, "nees_median_detected"))
+            nees = np.nanmedian(column(other, tracker, scenario, clutter, "nees_median_detected"))
             calibration_cells.append(f"{coverage[0]:.1f} / {coverage[1]:.1f}, {nees:.2f}")
         for table, row in (
             (ratios, ratio_cells),
@@ -137,31 +175,41 @@ def report(fixed: dict, random: dict, trackers) -> str:
             (calibration, calibration_cells),
         ):
             table.append(f"| `{tracker}` | " + " | ".join(row) + " |")
-    runs = len(next(iter(random.values())))
+    runs = len(next(iter(other.values())))
+    resampled = (
+        "seeds resampled together (they pair the runs)"
+        if comparison.paired
+        else "episodes resampled within each condition"
+    )
+    goal = (
+        ""
+        if comparison.goal is None
+        else f" Issue 12's goal 4 asks for at most {comparison.goal}; bold: the whole "
+        f"interval is above {comparison.goal}."
+    )
     return "\n".join(
         [
-            "### RMSE on random paths (reference paths in parentheses), m",
+            f"### RMSE, {comparison.other} ({comparison.base} in parentheses), m",
             "",
             f"Root mean square over the {runs} episodes of each episode's 2-D RMSE; `cN`: "
             "clutter rate N, sigma_z 1.",
             "",
             *rmse,
             "",
-            "### Random / reference paths, with 95 % bootstrap intervals",
+            f"### Ratio, {comparison.other} / {comparison.base}, with 95 % bootstrap intervals",
             "",
-            f"Issue 12's goal 4 asks for at most {GOAL_RATIO}; bold: the whole interval is "
-            f"above {GOAL_RATIO}.",
+            f"The ratio of the two RMSEs above; {resampled}.{goal}",
             "",
             *ratios,
             "",
-            f"### Paired difference to `{REFERENCE}` on random paths, m",
+            f"### Paired difference to `{REFERENCE}`, {comparison.other}, m",
             "",
             "Mean over the seeds of the episode RMSE minus the reference's, with the 95 % t "
             "interval; bold: the interval excludes 0 (negative: better than the reference).",
             "",
             *paired,
             "",
-            "### Calibration on random paths, steps where a sensor senses the target",
+            f"### Calibration, {comparison.other}, steps where a sensor senses the target",
             "",
             "3-sigma coverage X / Y, % (mean over episodes; nominal 99.73), and the median "
             "over episodes of the median 2-D NEES (nominal 1.39).",
@@ -169,6 +217,43 @@ def report(fixed: dict, random: dict, trackers) -> str:
             *calibration,
             "",
         ]
+    )
+
+
+def stored_versions(grids, out: Path) -> list[str]:
+    """The dgpt-gym versions that stored the finished runs of ``grids`` in ``out``."""
+    keys = {unit.key for grid in grids for unit in grid.units()}
+    with ResultsStore(out) as store:
+        return sorted({row["version"] for row in store.rows(keys, status="ok")})
+
+
+def layouts_report(trackers, runs: int, first_seed: int, out: Path, workers, progress) -> str:
+    """Both path modes in unseen layouts (run now, or found in ``out``) against layout 0,
+    whose runs must already be in ``out`` (the default run of this script, or the
+    ``--paper`` grid's and this script's with ``--out results/paper``); they are read as
+    stored, whichever version stored them, and the report names the versions."""
+    sections, base_grids = [], path_grids(trackers, runs, first_seed)
+    unseen_grids = path_grids(trackers, runs, first_seed, layout="per_episode")
+    for mode, paths in (("random", "random paths"), ("fixed", "reference paths")):
+        done, unseen = sweep_metrics(unseen_grids[mode], out, workers, progress)
+        print(
+            f"{mode} paths in unseen layouts: {done.ran} runs, {done.already_finished} already stored"
+        )
+        try:
+            base = stored_metrics(base_grids[mode], out)
+        except ValueError as error:
+            raise SystemExit(
+                f"{error}: run `python scripts/random_paths.py --out {out}` (same --trackers, "
+                "--runs, --first-seed) first, for the runs in layout 0"
+            ) from None
+        sections.append(
+            f"## {paths.capitalize()}\n\n" + report(base, unseen, trackers, layouts_on(paths))
+        )
+    versions = ", ".join(stored_versions(base_grids.values(), out))
+    return (
+        f"Layout 0 is the one every setting was chosen in (training seeds 1000 and up); the "
+        f"run of seed s here is in layout s, on the same path as its layout-0 run. The "
+        f"layout-0 runs are read as stored, by dgpt-gym {versions}.\n\n" + "\n".join(sections)
     )
 
 
@@ -180,17 +265,31 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "random_paths")
     parser.add_argument("--report", type=Path, help="also write the tables to this file")
     parser.add_argument("--workers", type=int, default=None, help="default: all cores")
+    parser.add_argument(
+        "--layout",
+        choices=LAYOUT_MODES,
+        default="fixed",
+        help="fixed: random against reference paths in layout 0; per_episode: both path "
+        "modes in unseen layouts (seed s in layout s) against layout 0",
+    )
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
-    grids = path_grids(args.trackers, args.runs, args.first_seed)
-    episodes = {}
-    for mode, grid in grids.items():
-        done, episodes[mode] = sweep_metrics(grid, args.out, args.workers, not args.no_progress)
-        print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
-    text = report(episodes["fixed"], episodes["random"], args.trackers)
+    progress = not args.no_progress
+    if args.layout == "per_episode":
+        title = "The trackers in unseen sensor layouts"
+        text = layouts_report(
+            args.trackers, args.runs, args.first_seed, args.out, args.workers, progress
+        )
+    else:
+        title = "The trackers off the reference paths"
+        episodes = {}
+        for mode, grid in path_grids(args.trackers, args.runs, args.first_seed).items():
+            done, episodes[mode] = sweep_metrics(grid, args.out, args.workers, progress)
+            print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
+        text = report(episodes["fixed"], episodes["random"], args.trackers)
     command = "python scripts/random_paths.py " + " ".join(sys.argv[1:] if argv is None else argv)
     text = (
-        f"# The trackers off the reference paths\n\nGenerated by `{command.strip()}` "
+        f"# {title}\n\nGenerated by `{command.strip()}` "
         f"(dgpt-gym {dgpt_gym.__version__}; seeds {args.first_seed}-"
         f"{args.first_seed + args.runs - 1}).\n\n{text}"
     )

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+import dgpt_gym
 from agents.rl.evaluation import (
     agents_against,
     iqm_interval,
@@ -702,7 +703,23 @@ def test_random_paths_tables_by_hand():
     assert rows[5].split(" | ")[1] == f"+1.50 ± {stats.t.ppf(0.975, 1) * 0.5:.2f}"
     assert rows[7].split(" | ")[1] == "50.0 / 100.0, 2.00"
     value, low, high = module.ratio_interval([3.0, 4.0, 5.0], [6.0, 8.0, 10.0])
-    assert value == pytest.approx(2.0) and low <= value <= high
+    assert value == pytest.approx(2.0) and low < 1.9 and high > 2.1
+    # paired, every resample of proportional episodes has the ratio 2: the interval is a point
+    assert module.ratio_interval([3.0, 4.0, 5.0], [6.0, 8.0, 10.0], paired=True) == (
+        pytest.approx(2.0),
+        pytest.approx(2.0),
+        pytest.approx(2.0),
+    )
+    # unseen layouts against layout 0: the same tables under the comparison's names, no goal
+    layouts = module.report(
+        fixed, random, ["dgpt-rbcm", "other"], module.layouts_on("random paths")
+    )
+    assert "### RMSE, unseen layouts, random paths (layout 0, random paths in parentheses)" in (
+        layouts
+    )
+    ratio_rows = [line for line in layouts.splitlines() if line.startswith("| `")][2:4]
+    assert ratio_rows[0].split(" | ")[1] == "2.00 [2.00, 2.00]"  # 6, 8 against 3, 4: paired
+    assert "**" not in layouts and "goal 4" not in layouts
 
 
 def run_on_both_path_modes_then_resume(script, args, runs):
@@ -722,6 +739,21 @@ def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     run_on_both_path_modes_then_resume("random_paths.py", args, 32)  # 2 x 8 cells x 2 seeds
     report = (tmp_path / "report.md").read_text()
     assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
+    # both path modes again in layouts 0 and 1 (seed s in layout s), against the stored layout 0
+    layouts = run_script("random_paths.py", *args, "--layout", "per_episode")
+    assert layouts.returncode == 0, layouts.stderr
+    assert "random paths in unseen layouts: 32 runs" in layouts.stdout
+    assert "fixed paths in unseen layouts: 32 runs" in layouts.stdout
+    report = (tmp_path / "report.md").read_text()
+    assert report.count("| `centroid` |") == 8 and "unseen sensor layouts" in report
+    assert f"by dgpt-gym {dgpt_gym.__version__}." in report
+
+
+def test_unseen_layouts_need_the_stored_layout_0_runs(tmp_path):
+    args = ["--trackers", "centroid", "--runs", "1", "--workers", "1", "--layout", "per_episode"]
+    result = run_script("random_paths.py", *args, "--out", str(tmp_path), "--no-progress")
+    assert result.returncode != 0
+    assert "not stored" in result.stderr and "for the runs in layout 0" in result.stderr
 
 
 def test_clutter_sweep_tables_by_hand():

@@ -551,7 +551,8 @@ def stored_metrics(grid: Grid, out: str | Path) -> dict[tuple, list[dict]]:
         if row is None or row["status"] != "ok":
             state = "not stored" if row is None else "failed"
             raise ValueError(
-                f"run {unit.cell} seed {unit.seed} ({grid.trajectory} paths) is {state} in {out}"
+                f"run {unit.cell} seed {unit.seed} ({grid.trajectory} paths, {grid.layout} "
+                f"layout) is {state} in {out}"
             )
         metrics.setdefault(unit.cell, []).append(row["metrics"])
     return metrics
@@ -580,14 +581,15 @@ def summarize_store(grids: Iterable[Grid], out: str | Path) -> tuple[list[dict],
     """Per-cell summaries (:func:`summarize_runs`, seeds in order, and the dgpt-gym
     ``versions`` that produced the runs) of the sweep's finished runs in the store at
     ``out``, in the grids' order, and the stored rows of its failed runs. The grids must
-    share one path mode (a cell does not name it)."""
+    share one path mode and one layout mode (a cell names neither)."""
     grids = list(grids)
-    modes = sorted({grid.trajectory for grid in grids})
-    if len(modes) > 1:
-        raise ValueError(
-            f"grids must share one trajectory to be summarised together; got {modes}: "
-            "summarise each path mode on its own"
-        )
+    for name, what in (("trajectory", "path mode"), ("layout", "layout mode")):
+        modes = sorted({getattr(grid, name) for grid in grids})
+        if len(modes) > 1:
+            raise ValueError(
+                f"grids must share one {name} to be summarised together; got {modes}: "
+                f"summarise each {what} on its own"
+            )
     units = sweep_units(grids)
     keys = {unit.key for unit in units}
     with ResultsStore(out) as store:

@@ -270,6 +270,8 @@ def test_per_episode_layouts_run_seed_s_in_layout_s_in_one_block_as_each_alone(t
     assert len(set(layouts)) == 3  # another layout, another episode
     with pytest.raises(ValueError, match=r"layout must be one of \['fixed', 'per_episode'\]"):
         Grid(**cell, layout="random")
+    with pytest.raises(ValueError, match=r"share one layout.*\['fixed', 'per_episode'\]"):
+        summarize_store([Grid(**cell), Grid(**cell, layout="per_episode")], tmp_path)
 
 
 def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path):
