@@ -2,12 +2,15 @@
 
 import csv
 import importlib.util
+import json
 import os
 import re
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from scipy import stats
@@ -20,7 +23,9 @@ from agents.rl.evaluation import (
     policy_cells,
 )
 from agents.rl.heuristics import HEURISTIC_GRIDS
+from dgpt_gym import make_tracker
 from dgpt_gym.benchmark.cli import with_inputs
+from dgpt_gym.benchmark.episodes import run_episode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -74,10 +79,43 @@ def test_evaluate_prints_the_nrmse_table(tmp_path):
     assert "0 failed runs" in result.stdout and (tmp_path / "results.md").exists()
 
 
+def test_evaluate_runs_off_the_reference_paths_and_layout(tmp_path):
+    """--trajectory random --layout per_episode: the stored runs are the episodes of a random
+    path with seed s in layout s; --paper refuses both, naming them."""
+    args = ["--out", str(tmp_path), "--trackers", "centroid", "--scenarios", "S2"]
+    args += ["--clutter-rates", "1", "--runs", "2", "--no-progress"]
+    result = run_script("evaluate.py", *args, "--trajectory", "random", "--layout", "per_episode")
+    assert result.returncode == 0, result.stderr
+    assert re.search(r"^\| centroid \| S2 \| 1 \| 1 \| [\d.]+ ± ", result.stdout, re.M)
+    with sqlite3.connect(tmp_path / "results.sqlite") as connection:
+        stored = connection.execute("SELECT seed, env_kwargs, metrics FROM runs").fetchall()
+    for seed, env_kwargs, metrics in sorted(stored):
+        env_kwargs = json.loads(env_kwargs)
+        assert (env_kwargs["trajectory"], env_kwargs["layout_seed"]) == ("random", seed)
+        env = gym.make("DGPTrack-v0", **env_kwargs)
+        direct = run_episode(env, make_tracker("centroid"), seed).metrics()
+        assert json.loads(metrics)["rmse_2d"] == direct["rmse_2d"]
+    assert [seed for seed, _, _ in sorted(stored)] == [0, 1]
+    refused = run_script(
+        "evaluate.py", "--paper", "--layout", "per_episode", "--out", str(tmp_path)
+    )
+    assert refused.returncode == 2 and "--trajectory and --layout apply" in refused.stderr
+
+
 def test_evaluate_help_documents_every_option():
     result = run_script("evaluate.py", "--help")
     assert result.returncode == 0
-    for option in ("--paper", "--scheduler", "--out", "--runs", "--inputs", "--workers", "--seed"):
+    for option in (
+        "--paper",
+        "--scheduler",
+        "--out",
+        "--runs",
+        "--inputs",
+        "--workers",
+        "--seed",
+        "--trajectory",
+        "--layout",
+    ):
         assert option in result.stdout
 
 

@@ -6,7 +6,9 @@ DGPT-GPoE, the pooled-trend DGPT-RBCM, the hybrid
 filter around each DGPT-RBCM, the CPF, the IMM-PDA and the clairvoyant floor; about a minute
 on 2 cores) and prints a table per cell: NRMSE with its 95 %
 interval over runs beside the paper's value, RMSE, the ratio to the clairvoyant floor, ANEES,
-3-sigma coverage and track loss. --paper runs the paper's full grid. Every
+3-sigma coverage and track loss. --trajectory random and --layout per_episode run the grid
+off the paper's setting: a random path per seed, and seed s in sensor layout s (every
+setting was chosen in layout 0). --paper runs the paper's full grid. Every
 finished run is stored at once in OUT/results.sqlite: re-running the same command resumes
 an interrupted sweep. The tables and figures are then regenerated from the database.
 --verify N re-runs N of the stored runs and checks that the installed code reproduces them.
@@ -40,6 +42,7 @@ from dgpt_gym.benchmark.tuning import (
     tune_windows,
 )
 from dgpt_gym.benchmark.windows import save_tuned_windows
+from dgpt_gym.env import LAYOUT_MODES, TRAJECTORY_MODES
 from dgpt_gym.naming import MODEL_SUFFIXES, split_tracker_id, tracker_id
 from dgpt_gym.registry import tracker_spec
 
@@ -94,6 +97,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="Monte Carlo runs per cell (default: 10, with --paper 100; this option applies "
         "to --paper too)",
+    )
+    grid.add_argument(
+        "--trajectory",
+        choices=TRAJECTORY_MODES,
+        default="fixed",
+        help="fixed: the scenarios' reference paths (the paper's); random: a new path of the "
+        "scenario's kind per seed (default: fixed)",
+    )
+    grid.add_argument(
+        "--layout",
+        choices=LAYOUT_MODES,
+        default="fixed",
+        help="fixed: the sensor layout of layout_seed 0, in which every setting was chosen; "
+        "per_episode: seed s in layout s (default: fixed)",
     )
     grid.add_argument(
         "--no-tuned-windows",
@@ -202,6 +219,12 @@ def with_inputs(trackers: list[str], inputs: list[str]) -> list[str]:
 
 
 def build_grids(args: argparse.Namespace) -> list[Grid]:
+    if args.paper and (args.trajectory, args.layout) != ("fixed", "fixed"):
+        raise ValueError(
+            "--trajectory and --layout apply to the grid of --trackers; --paper reports the "
+            "paper's reference paths in layout 0 (scripts/random_paths.py runs every tracker "
+            "off them)"
+        )
     if args.paper:
         runs = {} if args.runs is None else {"runs": args.runs}
         return [replace(grid, first_seed=args.seed, **runs) for grid in PAPER_SWEEP]
@@ -214,6 +237,8 @@ def build_grids(args: argparse.Namespace) -> list[Grid]:
             runs=QUICK.runs if args.runs is None else args.runs,
             first_seed=args.seed,
             tuned_windows=not args.no_tuned_windows,
+            trajectory=args.trajectory,
+            layout=args.layout,
         )
     ]
 
