@@ -35,7 +35,8 @@ LAYOUT_MODES = ("fixed", "per_episode")
 """Where an episode's sensor layout comes from, for the tools that run many episodes (the
 RL environments, :class:`dgpt_gym.benchmark.sweep.Grid`): ``"fixed"``, the env's
 ``layout_seed`` in every episode; ``"per_episode"``, the episode's seed, so that evaluation
-seeds 0-99 meet layouts that training seeds (1000 and up) never showed."""
+seeds 1-99 meet layouts that training seeds (1000 and up) never showed (seed 0 meets layout
+0, the default, in which the trackers' settings were chosen)."""
 RESET_OPTIONS = ("layout_seed",)
 """The keys ``reset(options=...)`` accepts."""
 OVERFLOW_PROBABILITY = 1e-9

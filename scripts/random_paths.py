@@ -26,15 +26,18 @@ Every setting was chosen in the environment's one sensor layout (``layout_seed=0
 path modes again with the run of seed s in layout s (:class:`Grid`'s ``layout``), on the
 same paths, and the same tables with layout 0 in place of the reference paths (its runs
 read from the store as they are; the ratio's interval resamples the seeds together).
+``--verify N`` then re-runs N of the runs the report read, whichever dgpt-gym version
+stored them, and checks every metric against the stored one.
 
     python scripts/random_paths.py --report docs/random_paths.md
     python scripts/random_paths.py --trackers dgpt-rbcm imm-pda --runs 10
-    python scripts/random_paths.py --layout per_episode --report docs/random_layouts.md
+    python scripts/random_paths.py --layout per_episode --report docs/random_layouts.md --verify 400
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -57,6 +60,7 @@ from dgpt_gym.benchmark.sweep import (  # noqa: E402
     on_every_path_mode,
     stored_metrics,
     sweep_metrics,
+    verify_store,
 )
 from dgpt_gym.env import LAYOUT_MODES  # noqa: E402
 
@@ -119,24 +123,26 @@ class Comparison(NamedTuple):
     goal: float | None
 
 
-PATH_MODES = Comparison("reference paths", "random paths", paired=False, goal=GOAL_RATIO)
+GOAL_4 = Comparison("reference paths", "random paths", paired=False, goal=GOAL_RATIO)
 """Issue 12's goal 4: random paths against the reference paths, in layout 0."""
 
 
-def layouts_on(paths: str) -> Comparison:
+def layout_comparison(paths: str) -> Comparison:
     """Unseen layouts against layout 0 on ``paths`` ("reference paths" or "random
     paths"): seed s in layout s and in layout 0 runs the same path."""
     return Comparison(f"layout 0, {paths}", f"unseen layouts, {paths}", paired=True, goal=None)
 
 
 REPORT_SECTIONS = ("rmse", "ratio", "paired", "calibration")
+"""The tables :func:`report` writes by default; ``"median"`` (each cell's median episode
+RMSE) is there to ask for."""
 
 
 def report(
     base: dict,
     other: dict,
     trackers,
-    comparison: Comparison = PATH_MODES,
+    comparison: Comparison = GOAL_4,
     only: tuple[str, ...] = REPORT_SECTIONS,
 ) -> str:
     """The Markdown tables of the module docstring from the episodes of both conditions
@@ -151,9 +157,9 @@ def report(
             [run[key] for run in episodes[(tracker, scenario, NOISE_STD, clutter)]], float
         )
 
-    ratios, rmse, paired, calibration = [header], [header], [header], [header]
+    ratios, rmse, medians, paired, calibration = [header], [header], [header], [header], [header]
     for tracker in trackers:
-        ratio_cells, rmse_cells, paired_cells, calibration_cells = [], [], [], []
+        ratio_cells, rmse_cells, median_cells, paired_cells, calibration_cells = [], [], [], [], []
         for scenario, clutter in cells:
             on_base = column(base, tracker, scenario, clutter, "rmse_2d")
             on_other = column(other, tracker, scenario, clutter, "rmse_2d")
@@ -161,6 +167,7 @@ def report(
             bold = "**" if comparison.goal is not None and low > comparison.goal else ""
             ratio_cells.append(f"{bold}{value:.2f}{bold} [{low:.2f}, {high:.2f}]")
             rmse_cells.append(f"{root_mean_square(on_other):.2f} ({root_mean_square(on_base):.2f})")
+            median_cells.append(f"{np.median(on_other):.2f} ({np.median(on_base):.2f})")
             if tracker == REFERENCE or REFERENCE not in trackers:
                 paired_cells.append("-")
             else:
@@ -180,6 +187,7 @@ def report(
         for table, row in (
             (ratios, ratio_cells),
             (rmse, rmse_cells),
+            (medians, median_cells),
             (paired, paired_cells),
             (calibration, calibration_cells),
         ):
@@ -204,6 +212,13 @@ def report(
             "clutter rate N, sigma_z 1.",
             "",
             *rmse,
+        ],
+        "median": [
+            f"### Median episode RMSE, {comparison.other} ({comparison.base} in parentheses), m",
+            "",
+            "Half the episodes lie below; the root mean square above is ruled by the worst.",
+            "",
+            *medians,
         ],
         "ratio": [
             f"### Ratio, {comparison.other} / {comparison.base}, with 95 % bootstrap intervals",
@@ -239,47 +254,79 @@ def stored_versions(grids, out: Path) -> list[str]:
         return sorted({row["version"] for row in store.rows(keys, status="ok")})
 
 
-def layouts_report(trackers, runs: int, first_seed: int, out: Path, workers, progress) -> str:
-    """Both path modes in unseen layouts (run now, or found in ``out``) against layout 0,
-    whose runs must already be in ``out`` (the default run of this script, or the
-    ``--paper`` grid's and this script's with ``--out results/paper``); they are read as
-    stored, whichever version stored them, and the report names the versions."""
-    sections, base_grids = [], path_grids(trackers, runs, first_seed)
+def layout_runs(trackers, runs: int, first_seed: int, out: Path, workers, progress):
+    """The episodes in layout 0 (already in ``out``: the default run of this script, or the
+    ``--paper`` grid's and this script's with ``--out results/paper``; read as stored,
+    whichever version stored them) and in unseen layouts (run now, or found in ``out``), by
+    path mode, and the grids they come from."""
+    base_grids = path_grids(trackers, runs, first_seed)
     unseen_grids = path_grids(trackers, runs, first_seed, layout="per_episode")
-    unseen_by_mode = {}
-    for mode, paths in (("random", "random paths"), ("fixed", "reference paths")):
-        done, unseen = sweep_metrics(unseen_grids[mode], out, workers, progress)
-        unseen_by_mode[mode] = unseen
+    try:  # before running anything
+        base = {mode: stored_metrics(grid, out) for mode, grid in base_grids.items()}
+    except ValueError as error:
+        raise SystemExit(
+            f"{error}: run `python scripts/random_paths.py --out {out}` (same --trackers, "
+            "--runs, --first-seed) first, for the runs in layout 0"
+        ) from None
+    unseen = {}
+    for mode, grid in unseen_grids.items():
+        done, unseen[mode] = sweep_metrics(grid, out, workers, progress)
         print(
-            f"{mode} paths in unseen layouts: {done.ran} runs, {done.already_finished} already stored"
+            f"{mode} paths in unseen layouts: {done.ran} runs, "
+            f"{done.already_finished} already stored"
         )
-        try:
-            base = stored_metrics(base_grids[mode], out)
-        except ValueError as error:
-            raise SystemExit(
-                f"{error}: run `python scripts/random_paths.py --out {out}` (same --trackers, "
-                "--runs, --first-seed) first, for the runs in layout 0"
-            ) from None
-        sections.append(
-            f"## {paths.capitalize()}\n\n" + report(base, unseen, trackers, layouts_on(paths))
+    return base, unseen, [*base_grids.values(), *unseen_grids.values()]
+
+
+def layouts_report(base: dict, unseen: dict, trackers, versions: list[str]) -> str:
+    """The tables of :func:`report` for each path mode, unseen layouts against layout 0
+    (``base`` and ``unseen`` by path mode, as :func:`layout_runs` returns them), and goal
+    4's ratio with both path modes in unseen layouts; ``versions``: those that stored the
+    layout-0 runs."""
+    sections = [
+        f"## {paths.capitalize()}\n\n"
+        + report(
+            base[mode],
+            unseen[mode],
+            trackers,
+            layout_comparison(paths),
+            only=("rmse", "median", "ratio", "paired", "calibration"),
         )
+        for mode, paths in (("random", "random paths"), ("fixed", "reference paths"))
+    ]
     sections.append(
         "## Random against reference paths, both in unseen layouts\n\n"
         "Issue 12's goal 4 where the reference paths do not have layout 0's coverage.\n\n"
         + report(
-            unseen_by_mode["fixed"],
-            unseen_by_mode["random"],
+            unseen["fixed"],
+            unseen["random"],
             trackers,
-            PATH_MODES._replace(base="reference paths in unseen layouts", other="random paths"),
+            GOAL_4._replace(base="reference paths in unseen layouts", other="random paths"),
             only=("ratio",),
         )
     )
-    versions = ", ".join(stored_versions(base_grids.values(), out))
     return (
-        f"Layout 0 is the one every setting was chosen in (training seeds 1000 and up); the "
-        f"run of seed s here is in layout s, on the same path as its layout-0 run. The "
-        f"layout-0 runs are read as stored, by dgpt-gym {versions}.\n\n" + "".join(sections)
+        "Layout 0 is the one every setting was chosen in (training seeds 1000 and up); the "
+        "run of seed s here is in layout s, on the same path as its layout-0 run (seed 0's "
+        "is layout 0 itself, so one pair of each cell is the same run twice). The layout-0 "
+        f"runs are read as stored, by dgpt-gym {', '.join(versions)}.\n\n" + "".join(sections)
     )
+
+
+def verify(grids, out: Path, count: int, workers) -> int:
+    """``--verify N``: re-run N of the runs the report read, whichever version stored them,
+    and compare every metric; 1 if one differs."""
+    checked = verify_store(
+        grids, out, count, workers or os.cpu_count() or 1, progress=False, any_version=True
+    )
+    for line in checked.mismatches:
+        print(f"  differs: {line}")
+    verdict = "every metric equals the stored one" if not checked.mismatches else "some differ"
+    print(
+        f"re-ran {checked.checked} of the runs read, {checked.checked_other_versions} of them "
+        f"stored by other versions than {dgpt_gym.__version__}: {verdict}"
+    )
+    return 1 if checked.mismatches else 0
 
 
 def main(argv=None) -> None:
@@ -297,20 +344,37 @@ def main(argv=None) -> None:
         help="fixed: random against reference paths in layout 0; per_episode: both path "
         "modes in unseen layouts (seed s in layout s) against layout 0",
     )
+    parser.add_argument(
+        "--verify",
+        type=int,
+        metavar="N",
+        help="then re-run N of the runs the report read, whichever version stored them, and "
+        "check that every metric is the stored one",
+    )
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     progress = not args.no_progress
     if args.layout == "per_episode":
         title = "The trackers in unseen sensor layouts"
-        text = layouts_report(
+        base, unseen, grids = layout_runs(
             args.trackers, args.runs, args.first_seed, args.out, args.workers, progress
         )
+        versions = stored_versions(grids[:2], args.out)
+        if versions != [dgpt_gym.__version__]:
+            print(
+                f"note: the layout-0 runs were stored by dgpt-gym {', '.join(versions)}; "
+                "--verify N re-runs N of the runs read with this code",
+                file=sys.stderr,
+            )
+        text = layouts_report(base, unseen, args.trackers, versions)
     else:
         title = "The trackers off the reference paths"
-        episodes = {}
-        for mode, grid in path_grids(args.trackers, args.runs, args.first_seed).items():
-            done, episodes[mode] = sweep_metrics(grid, args.out, args.workers, progress)
-            print(f"{mode} paths: {done.ran} runs, {done.already_finished} already stored")
+        episodes, grids = {}, list(path_grids(args.trackers, args.runs, args.first_seed).values())
+        for grid in grids:
+            done, episodes[grid.trajectory] = sweep_metrics(grid, args.out, args.workers, progress)
+            print(
+                f"{grid.trajectory} paths: {done.ran} runs, {done.already_finished} already stored"
+            )
         text = report(episodes["fixed"], episodes["random"], args.trackers)
     command = "python scripts/random_paths.py " + " ".join(sys.argv[1:] if argv is None else argv)
     text = (
@@ -321,6 +385,8 @@ def main(argv=None) -> None:
     print(text)
     if args.report:
         args.report.write_text(text)
+    if args.verify is not None:
+        raise SystemExit(verify(grids, args.out, args.verify, args.workers))
 
 
 if __name__ == "__main__":

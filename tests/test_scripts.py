@@ -750,7 +750,7 @@ def test_random_paths_tables_by_hand():
     )
     # unseen layouts against layout 0: the same tables under the comparison's names, no goal
     layouts = module.report(
-        fixed, random, ["dgpt-rbcm", "other"], module.layouts_on("random paths")
+        fixed, random, ["dgpt-rbcm", "other"], module.layout_comparison("random paths")
     )
     assert "### RMSE, unseen layouts, random paths (layout 0, random paths in parentheses)" in (
         layouts
@@ -758,6 +758,12 @@ def test_random_paths_tables_by_hand():
     ratio_rows = [line for line in layouts.splitlines() if line.startswith("| `")][2:4]
     assert ratio_rows[0].split(" | ")[1] == "2.00 [2.00, 2.00]"  # 6, 8 against 3, 4: paired
     assert "**" not in layouts and "goal 4" not in layouts
+    medians = module.report(fixed, random, ["dgpt-rbcm", "other"], only=("median",))
+    assert medians.startswith("### Median episode RMSE, random paths (reference paths in")
+    assert [line.split(" | ")[1] for line in medians.splitlines() if line.startswith("| `")] == [
+        "7.00 (3.50)",  # the medians of 6, 8 and of 3, 4
+        "8.50 (3.50)",
+    ]
 
 
 def run_on_both_path_modes_then_resume(script, args, runs):
@@ -778,14 +784,16 @@ def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert report.count("| `centroid` |") == 4 and "seeds 0-1" in report
     # both path modes again in layouts 0 and 1 (seed s in layout s), against the stored layout 0
-    layouts = run_script("random_paths.py", *args, "--layout", "per_episode")
+    layouts = run_script("random_paths.py", *args, "--layout", "per_episode", "--verify", "5")
     assert layouts.returncode == 0, layouts.stderr
     assert "random paths in unseen layouts: 32 runs" in layouts.stdout
     assert "fixed paths in unseen layouts: 32 runs" in layouts.stdout
     report = (tmp_path / "report.md").read_text()
-    # four tables per path mode, and goal 4's ratio with both modes in unseen layouts
-    assert report.count("| `centroid` |") == 9 and "unseen sensor layouts" in report
+    # five tables per path mode, and goal 4's ratio with both modes in unseen layouts
+    assert report.count("| `centroid` |") == 11 and "unseen sensor layouts" in report
     assert f"by dgpt-gym {dgpt_gym.__version__}." in report
+    assert "re-ran 5 of the runs read, 0 of them stored by other versions" in layouts.stdout
+    assert "every metric equals the stored one" in layouts.stdout
 
 
 def test_unseen_layouts_need_the_stored_layout_0_runs(tmp_path):
@@ -793,6 +801,7 @@ def test_unseen_layouts_need_the_stored_layout_0_runs(tmp_path):
     result = run_script("random_paths.py", *args, "--out", str(tmp_path), "--no-progress")
     assert result.returncode != 0
     assert "not stored" in result.stderr and "for the runs in layout 0" in result.stderr
+    assert "unseen layouts:" not in result.stdout  # nothing ran before the check
 
 
 def test_clutter_sweep_tables_by_hand():

@@ -16,8 +16,8 @@ __all__ = ["TrackerInsideEnv", "LAYOUTS"]
 LAYOUTS = LAYOUT_MODES
 """Where an RL environment's sensor layout comes from: ``"fixed"``, the inner env's
 ``layout_seed`` in every episode; ``"per_episode"``, the reset seed, so that evaluation
-seeds 0-99 meet layouts that training seeds (1000 and up, or the training environments'
-10000 and up) never showed (:data:`dgpt_gym.env.LAYOUT_MODES`)."""
+seeds 0-99 meet layouts that training with ``"per_episode"`` (seeds 1000 and up, or the
+training environments' 10000 and up) never showed (:data:`dgpt_gym.env.LAYOUT_MODES`)."""
 
 
 class TrackerInsideEnv(gym.Env, abc.ABC):

@@ -130,7 +130,10 @@ class Grid:
     (:mod:`dgpt_gym.benchmark.tuning`). ``trajectory``: the environment's path
     mode (:data:`dgpt_gym.env.TRAJECTORY_MODES`); ``"fixed"``, the paper's reference
     paths, leaves it out of the runs' environment arguments, so their keys in the store are
-    those of the grids without the field."""
+    those of the grids without the field. ``layout``: where each run's sensor layout comes
+    from (:data:`dgpt_gym.env.LAYOUT_MODES`); ``"per_episode"`` runs seed s in layout s,
+    adding ``layout_seed`` to every run's environment arguments (seed 0's too, whose layout
+    is the environment's default), and ``"fixed"`` leaves it out."""
 
     trackers: tuple[str | Variant, ...]
     scenarios: tuple[str, ...] = ("S1", "S2", "S3", "S4")
@@ -284,10 +287,10 @@ def episode_results(units: Sequence[RunUnit]) -> list[EpisodeResult]:
 def run_block(units: Sequence[RunUnit]) -> list[dict]:
     """Run the episodes of ``units``, which share tracker and environment settings but
     their seeds and layouts (:func:`make_blocks`), in lockstep
-    (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never raises. One outcome per unit as in :func:`run_unit`; ``runtime_s`` is the block's wall
-    time divided by its size. If the block raises, each unit is run alone, so one failing
-    run is recorded as failed and the others as they would be anyway (a run's numbers do
-    not depend on its block)."""
+    (:func:`dgpt_gym.benchmark.episodes.run_episodes`); never raises. One outcome per unit
+    as in :func:`run_unit`; ``runtime_s`` is the block's wall time divided by its size. If
+    the block raises, each unit is run alone, so one failing run is recorded as failed and
+    the others as they would be anyway (a run's numbers do not depend on its block)."""
 
     started = time.perf_counter()
     try:
@@ -321,7 +324,8 @@ def _block_key(unit: RunUnit) -> str:
 
 def make_blocks(units: Sequence[RunUnit], batch_size: int) -> list[tuple[RunUnit, ...]]:
     """Split ``units`` into blocks of at most ``batch_size`` runs of one tracker on one cell
-    (same settings, different seeds and perhaps layouts), keeping their order; blocks run in lockstep."""
+    (same settings, different seeds and perhaps layouts), keeping their order; blocks run in
+    lockstep."""
     check_integer("batch_size", batch_size, low=1)
     by_setting: dict[str, list[RunUnit]] = {}
     for unit in units:
@@ -466,12 +470,14 @@ def run_sweep(
 @dataclass(frozen=True)
 class VerifyReport:
     """What :func:`verify_store` found: ``checked`` runs re-run, ``other_versions`` finished
-    runs of the sweep stored by another dgpt-gym version (not checked), and one line per run
+    runs of the sweep stored by another dgpt-gym version (not checked, unless
+    ``any_version``: then ``checked_other_versions`` of them were), and one line per run
     whose metrics differ."""
 
     checked: int
     other_versions: int
     mismatches: tuple[str, ...]
+    checked_other_versions: int = 0
 
 
 def _differing_metrics(stored: dict, rerun: dict) -> list[str]:
@@ -496,10 +502,14 @@ def verify_store(
     progress: bool = True,
     seed: int = 0,
     batch_size: int = DEFAULT_BATCH_SIZE,
+    any_version: bool = False,
 ) -> VerifyReport:
     """Re-run ``count`` of the sweep's runs that this dgpt-gym version finished in the store
     at ``out``, chosen at random (a ``numpy.random.Generator`` seeded with ``seed``), and
     compare every metric with the stored one to the last bit, the wall-clock ones aside.
+    With ``any_version`` the runs are drawn from every version's: a study that reads runs
+    an earlier version stored, whose trackers did not change, shows that they are this
+    code's numbers.
 
     A difference means the store holds numbers the installed code does not produce: rows
     from a run interrupted across a code change, another machine's floating point, or a
@@ -511,16 +521,16 @@ def verify_store(
     units = {unit.key: unit for unit in sweep_units(grids)}
     with ResultsStore(out) as store:
         rows = store.rows(set(units), status="ok")
-    mine = [row for row in rows if row["version"] == dgpt_gym.__version__]
-    if not mine:
+    drawable = [row for row in rows if any_version or row["version"] == dgpt_gym.__version__]
+    if not drawable:
+        by = "" if any_version else f" by dgpt-gym {dgpt_gym.__version__}"
         raise ValueError(
-            f"the store at {out} holds no finished run of this sweep by dgpt-gym "
-            f"{dgpt_gym.__version__}; run the sweep first"
+            f"the store at {out} holds no finished run of this sweep{by}; run it first"
         )
     picked = np.random.default_rng(seed).choice(
-        len(mine), size=min(count, len(mine)), replace=False
+        len(drawable), size=min(count, len(drawable)), replace=False
     )
-    chosen = [mine[index] for index in sorted(picked)]
+    chosen = [drawable[index] for index in sorted(picked)]
     outcomes = run_units([units[row["run_key"]] for row in chosen], workers, progress, batch_size)
     mismatches = []
     for row, outcome in zip(chosen, outcomes):
@@ -535,7 +545,11 @@ def verify_store(
                 + "; ".join(differing[:3])
                 + (f"; and {len(differing) - 3} more" if len(differing) > 3 else "")
             )
-    return VerifyReport(len(chosen), len(rows) - len(mine), tuple(mismatches))
+
+    def others(chosen_rows):
+        return sum(row["version"] != dgpt_gym.__version__ for row in chosen_rows)
+
+    return VerifyReport(len(chosen), others(rows), tuple(mismatches), others(chosen))
 
 
 def stored_metrics(grid: Grid, out: str | Path) -> dict[tuple, list[dict]]:

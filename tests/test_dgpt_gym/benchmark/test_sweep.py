@@ -266,8 +266,13 @@ def test_per_episode_layouts_run_seed_s_in_layout_s_in_one_block_as_each_alone(t
         alone = run_episode(env, make_tracker(tracker, **tuned_kwargs(tracker, "S1")), unit.seed)
         expected = {k: v for k, v in alone.metrics().items() if k not in DETERMINISTIC}
         assert json.dumps(stored[unit.key], sort_keys=True) == json.dumps(expected, sort_keys=True)
-    layouts = [stored[unit.key]["rmse_2d"] for unit in units]
-    assert len(set(layouts)) == 3  # another layout, another episode
+    # seed 0's layout is the default one, seed 1's another: only seed 0's run is the fixed
+    # grid's
+    fixed = {unit.seed: unit for unit in Grid(**cell).units()}
+    run_sweep([Grid(**{**cell, "runs": 2})], tmp_path, workers=1, progress=False)
+    every = deterministic_metrics_by_key(tmp_path)
+    assert every[units[0].key] == every[fixed[0].key]
+    assert every[units[1].key]["rmse_2d"] != every[fixed[1].key]["rmse_2d"]
     with pytest.raises(ValueError, match=r"layout must be one of \['fixed', 'per_episode'\]"):
         Grid(**cell, layout="random")
     with pytest.raises(ValueError, match=r"share one layout.*\['fixed', 'per_episode'\]"):
@@ -338,6 +343,10 @@ def test_verify_reruns_stored_runs_and_names_the_metric_that_differs(tmp_path, m
     (line,) = tampered.mismatches
     assert line.startswith("centroid S2 sigma_z 1 clutter 5 seed 1: nrmse_x ")
     assert "->" in line and ";" not in line  # that metric alone
+    # any_version draws from the other version's run too, and finds it this code's numbers
+    every = verify_store([grid], tmp_path, count=100, progress=False, any_version=True)
+    assert (every.checked, every.other_versions, every.mismatches) == (6, 1, tampered.mismatches)
+    assert (every.checked_other_versions, tampered.checked_other_versions) == (1, 0)
     argv = ["--trackers", "centroid", "--scenarios", "S1", "S2", "--clutter-rates", "5"]
     argv += ["--runs", "3", "--out", str(tmp_path), "--verify", "6", "--no-progress"]
     assert evaluate_cli.main(argv) == 1
