@@ -801,7 +801,8 @@ def test_unseen_layouts_need_the_stored_layout_0_runs(tmp_path):
     result = run_script("random_paths.py", *args, "--out", str(tmp_path), "--no-progress")
     assert result.returncode != 0
     assert "not stored" in result.stderr and "for the runs in layout 0" in result.stderr
-    assert "unseen layouts:" not in result.stdout  # nothing ran before the check
+    with sqlite3.connect(tmp_path / "results.sqlite") as connection:  # nothing ran before
+        assert connection.execute("SELECT COUNT(*) FROM runs").fetchone() == (0,)
 
 
 def test_clutter_sweep_tables_by_hand():
