@@ -758,6 +758,15 @@ def test_random_paths_tables_by_hand():
     ratio_rows = [line for line in layouts.splitlines() if line.startswith("| `")][2:4]
     assert ratio_rows[0].split(" | ")[1] == "2.00 [2.00, 2.00]"  # 6, 8 against 3, 4: paired
     assert "**" not in layouts and "goal 4" not in layouts
+    # the UCB: coverage per axis in %, mean half-width (width 8 / 2) over mean RMSE (2 and
+    # 4); an episode without a value (NaN) is left out of that mean, as in the grid's summaries
+    bound = {"ucb_coverage_x_detected": 0.99, "ucb_coverage_y_detected": 1.0}
+    bound |= {"ucb_width_x_detected": 8.0, "ucb_width_y_detected": 8.0}
+    bound |= {"rmse_x_detected": 2.0, "rmse_y_detected": 4.0}
+    assert module.ucb_cell([bound, bound | {"ucb_width_x_detected": np.nan}]) == (
+        "99.00 / 100.00, 2.00 / 1.00"
+    )
+    assert module.ucb_cell([dict.fromkeys(bound, np.nan)]) == "-"
     medians = module.report(fixed, random, ["dgpt-rbcm", "other"], only=("median",))
     assert medians.startswith("### Median episode RMSE, random paths (reference paths in")
     assert [line.split(" | ")[1] for line in medians.splitlines() if line.startswith("| `")] == [
@@ -789,8 +798,8 @@ def test_random_paths_runs_both_path_modes_and_resumes(tmp_path):
     assert "random paths in unseen layouts: 32 runs" in layouts.stdout
     assert "fixed paths in unseen layouts: 32 runs" in layouts.stdout
     report = (tmp_path / "report.md").read_text()
-    # five tables per path mode, and goal 4's ratio with both modes in unseen layouts
-    assert report.count("| `centroid` |") == 11 and "unseen sensor layouts" in report
+    # six tables per path mode, and goal 4's ratio with both modes in unseen layouts
+    assert report.count("| `centroid` |") == 13 and "unseen sensor layouts" in report
     assert f"by dgpt-gym {dgpt_gym.__version__}." in report
     assert "re-ran 5 of the runs read, 0 of them stored by other versions" in layouts.stdout
     assert "every metric equals the stored one" in layouts.stdout
