@@ -113,6 +113,11 @@ class MultipleModelCPF(TrackerBase):
         initial_mode_probabilities: a probability vector.
         resample_threshold: resample when ESS < threshold x N, in (0, 1].
         max_initial_speed: upper bound of the initial speed, m/s.
+        kernel_position_std_floor: least standard deviation (m) of the convolution kernel
+            per position axis (default 0: the kernel is Silverman's alone). The kernel's
+            covariance is the particles' weighted covariance times the bandwidth factor,
+            which is about 0 when the weights have degenerated onto a few particles: the
+            resampled cloud then collapses to a point and reports a variance near 0.
     """
 
     name = "cpf"
@@ -126,6 +131,7 @@ class MultipleModelCPF(TrackerBase):
         initial_mode_probabilities: np.ndarray = INITIAL_MODE_PROBABILITIES,
         resample_threshold: float = 0.5,
         max_initial_speed: float = 30.0,
+        kernel_position_std_floor: float = 0.0,
     ) -> None:
         self.n_particles = check_integer("n_particles", n_particles, low=1)
         self.acceleration_std = check_real("acceleration_std", acceleration_std, low=0.0)
@@ -151,6 +157,9 @@ class MultipleModelCPF(TrackerBase):
             "resample_threshold", resample_threshold, low=0.0, high=1.0, low_inclusive=False
         )
         self.max_initial_speed = check_real("max_initial_speed", max_initial_speed, low=0.0)
+        self.kernel_position_std_floor = check_real(
+            "kernel_position_std_floor", kernel_position_std_floor, low=0.0
+        )
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
         self.spec_ = spec
@@ -220,7 +229,13 @@ class MultipleModelCPF(TrackerBase):
         covariance = (weights[:, None] * centred).T @ centred
         dimension = self.particles_.shape[1]
         bandwidth = (4.0 / (n * (dimension + 2))) ** (1.0 / (dimension + 4))
-        factor = np.linalg.cholesky(bandwidth**2 * covariance + 1e-9 * np.eye(dimension))
+        kernel = bandwidth**2 * covariance
+        if self.kernel_position_std_floor > 0.0:
+            positions = [0, 2]
+            kernel[positions, positions] = np.maximum(
+                kernel[positions, positions], self.kernel_position_std_floor**2
+            )
+        factor = np.linalg.cholesky(kernel + 1e-9 * np.eye(dimension))
         self.particles_ = self.particles_[index] + rng.normal(size=(n, dimension)) @ factor.T
         self.modes_ = self.modes_[index]
         self.log_weights_ = np.full(n, -np.log(n))

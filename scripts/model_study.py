@@ -134,6 +134,15 @@ CANDIDATES = {
     # references, not GP models: the accuracy floor and the strongest standard tracker
     "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),
     "imm-pda": ("baselines.pda:IMMPDAFilter", {}),
+    # the paper's CPF baseline, and with a floor under its convolution kernel's position sd
+    "cpf": ("baselines.cpf:MultipleModelCPF", {}),
+    **{
+        f"cpf-kernel-floor-{floor:g}": (
+            "baselines.cpf:MultipleModelCPF",
+            {"kernel_position_std_floor": floor},
+        )
+        for floor in (0.5, 1.0, 2.0)
+    },
     "se-zero": ("agents.dgpt:DGPT", {"window": 3, "mean": "zero"}),
     "se-zero-loose": (
         "agents.dgpt:DGPT",
