@@ -295,7 +295,7 @@ def layout_runs(trackers, runs: int, first_seed: int, out: Path, workers, progre
     """The episodes in layout 0 (already in ``out``: the default run of this script, or the
     ``--paper`` grid's and this script's with ``--out results/paper``; read as stored,
     whichever version stored them) and in unseen layouts (run now, or found in ``out``), by
-    path mode, and the grids they come from."""
+    path mode; the versions that stored the layout-0 runs; and every grid read."""
     base_grids = path_grids(trackers, runs, first_seed)
     unseen_grids = path_grids(trackers, runs, first_seed, layout="per_episode")
     try:  # before running anything
@@ -312,7 +312,8 @@ def layout_runs(trackers, runs: int, first_seed: int, out: Path, workers, progre
             f"{mode} paths in unseen layouts: {done.ran} runs, "
             f"{done.already_finished} already stored"
         )
-    return base, unseen, [*base_grids.values(), *unseen_grids.values()]
+    versions = stored_versions(base_grids.values(), out)
+    return base, unseen, versions, [*base_grids.values(), *unseen_grids.values()]
 
 
 def layouts_report(base: dict, unseen: dict, trackers, versions: list[str]) -> str:
@@ -398,10 +399,9 @@ def main(argv=None) -> None:
     progress = not args.no_progress
     if args.layout == "per_episode":
         title = "The trackers in unseen sensor layouts"
-        base, unseen, grids = layout_runs(
+        base, unseen, versions, grids = layout_runs(
             args.trackers, args.runs, args.first_seed, args.out, args.workers, progress
         )
-        versions = stored_versions(grids[:2], args.out)
         if versions != [dgpt_gym.__version__]:
             print(
                 f"note: the layout-0 runs were stored by dgpt-gym {', '.join(versions)}; "
