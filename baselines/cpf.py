@@ -14,7 +14,12 @@ Centralized: one filter processes every sensor's measurements. State per particl
   ``resample_threshold`` x N, followed by the convolution (regularisation) step: every
   resampled state is jittered by a Gaussian kernel whose covariance is the weighted
   covariance of the particles times Silverman's bandwidth factor (Musso, Oudjane and Le
-  Gland's regularised particle filter).
+  Gland's regularised particle filter). The paper prints no kernel. Its position variance
+  is floored at the least that the filter's own model allows the posterior after the step
+  (:func:`least_position_variance`): when the weights have degenerated onto a few
+  particles, their weighted covariance, and with it Silverman's kernel, is about 0, and
+  without the floor the resampled cloud collapses onto one point and reports a variance
+  near 0 (dgpt-gym before 0.25.0: the episodes' ANEES on sensed steps up to 4e7).
 
 Initialisation (first step with measurements): positions are drawn around the
 measurements (each particle picks one at random and adds N(0, sigma_z^2 I)), velocities
@@ -43,6 +48,7 @@ __all__ = [
     "TURN_RATES",
     "MODE_TRANSITION",
     "INITIAL_MODE_PROBABILITIES",
+    "least_position_variance",
     "validate_mode_transition",
 ]
 
@@ -85,6 +91,22 @@ def turn_transition(omega: float, dt: float) -> np.ndarray:
     )
 
 
+def least_position_variance(
+    dt: float, acceleration_std: float, noise_std: float, n_measurements: int
+) -> float:
+    """The least position variance per axis, m^2, that the CPF's motion model allows the
+    exact posterior after a step with ``n_measurements`` measurements of sd ``noise_std``:
+    1 / (1 / q + m / sigma_z^2) with q = (dt^2 / 2 x ``acceleration_std``)^2, the position
+    variance the step's acceleration noise adds. Given the previous state, the mode and the
+    association the posterior is Gaussian with at least this variance (all m measurements
+    the target's); by the law of total variance the posterior, a mixture over those, varies
+    at least as much. 0 without acceleration noise."""
+    q = (0.5 * dt**2 * acceleration_std) ** 2
+    if q == 0.0:
+        return 0.0
+    return 1.0 / (1.0 / q + n_measurements / noise_std**2)
+
+
 def validate_mode_transition(matrix: np.ndarray, name: str = "mode_transition") -> np.ndarray:
     """A square row-stochastic matrix (non-negative rows summing to 1), or ``ValueError``."""
     matrix = np.asarray(matrix, dtype=float)
@@ -114,10 +136,11 @@ class MultipleModelCPF(TrackerBase):
         resample_threshold: resample when ESS < threshold x N, in (0, 1].
         max_initial_speed: upper bound of the initial speed, m/s.
         kernel_position_std_floor: least standard deviation (m) of the convolution kernel
-            per position axis (default 0: the kernel is Silverman's alone). The kernel's
-            covariance is the particles' weighted covariance times the bandwidth factor,
-            which is about 0 when the weights have degenerated onto a few particles: the
-            resampled cloud then collapses to a point and reports a variance near 0.
+            per position axis; None (the default) floors its variance at the step's
+            :func:`least_position_variance` instead, and 0 leaves Silverman's kernel alone,
+            as dgpt-gym before 0.25.0 did. Chosen on training seeds 1000-1029 (S1-S4,
+            clutter 1 and 5, both path modes, sigma_z 1 and 4) against 0, 0.5, 1 and 2 m:
+            docs/analysis.md, section "0.25.0".
     """
 
     name = "cpf"
@@ -131,7 +154,7 @@ class MultipleModelCPF(TrackerBase):
         initial_mode_probabilities: np.ndarray = INITIAL_MODE_PROBABILITIES,
         resample_threshold: float = 0.5,
         max_initial_speed: float = 30.0,
-        kernel_position_std_floor: float = 0.0,
+        kernel_position_std_floor: float | None = None,
     ) -> None:
         self.n_particles = check_integer("n_particles", n_particles, low=1)
         self.acceleration_std = check_real("acceleration_std", acceleration_std, low=0.0)
@@ -157,8 +180,10 @@ class MultipleModelCPF(TrackerBase):
             "resample_threshold", resample_threshold, low=0.0, high=1.0, low_inclusive=False
         )
         self.max_initial_speed = check_real("max_initial_speed", max_initial_speed, low=0.0)
-        self.kernel_position_std_floor = check_real(
-            "kernel_position_std_floor", kernel_position_std_floor, low=0.0
+        self.kernel_position_std_floor = (
+            None
+            if kernel_position_std_floor is None
+            else check_real("kernel_position_std_floor", kernel_position_std_floor, low=0.0)
         )
 
     def reset(self, spec: ProblemSpec, seed: int | None = None) -> None:
@@ -218,10 +243,12 @@ class MultipleModelCPF(TrackerBase):
         self.log_weights_ -= np.logaddexp.reduce(self.log_weights_)
         weights = np.exp(self.log_weights_)
         if 1.0 / np.sum(weights**2) < self.resample_threshold * self.n_particles:
-            self._resample(weights)
+            self._resample(weights, measurements.shape[0])
 
-    def _resample(self, weights: np.ndarray) -> None:
-        """Systematic resampling followed by the Gaussian convolution kernel."""
+    def _resample(self, weights: np.ndarray, n_measurements: int) -> None:
+        """Systematic resampling followed by the Gaussian convolution kernel, whose position
+        variance is floored (``kernel_position_std_floor``; by default the step's
+        :func:`least_position_variance`)."""
         n, rng = self.n_particles, self.rng_
         index = resample_systematic(weights, rng)
         mean = weights @ self.particles_
@@ -230,11 +257,14 @@ class MultipleModelCPF(TrackerBase):
         dimension = self.particles_.shape[1]
         bandwidth = (4.0 / (n * (dimension + 2))) ** (1.0 / (dimension + 4))
         kernel = bandwidth**2 * covariance
-        if self.kernel_position_std_floor > 0.0:
-            positions = [0, 2]
-            kernel[positions, positions] = np.maximum(
-                kernel[positions, positions], self.kernel_position_std_floor**2
+        if self.kernel_position_std_floor is None:
+            floor = least_position_variance(
+                self.spec_.dt, self.acceleration_std, self.spec_.model_noise_std, n_measurements
             )
+        else:
+            floor = self.kernel_position_std_floor**2
+        positions = [0, 2]
+        kernel[positions, positions] = np.maximum(kernel[positions, positions], floor)
         factor = np.linalg.cholesky(kernel + 1e-9 * np.eye(dimension))
         self.particles_ = self.particles_[index] + rng.normal(size=(n, dimension)) @ factor.T
         self.modes_ = self.modes_[index]

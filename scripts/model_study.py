@@ -134,14 +134,15 @@ CANDIDATES = {
     # references, not GP models: the accuracy floor and the strongest standard tracker
     "clairvoyant": ("baselines.clairvoyant:ClairvoyantFilter", {}),
     "imm-pda": ("baselines.pda:IMMPDAFilter", {}),
-    # the paper's CPF baseline, and with a floor under its convolution kernel's position sd
+    # the paper's CPF baseline (its kernel floored at the model's least posterior variance),
+    # and with a fixed floor under the kernel's position sd (0: none, as before 0.25.0)
     "cpf": ("baselines.cpf:MultipleModelCPF", {}),
     **{
         f"cpf-kernel-floor-{floor:g}": (
             "baselines.cpf:MultipleModelCPF",
             {"kernel_position_std_floor": floor},
         )
-        for floor in (0.5, 1.0, 2.0)
+        for floor in (0.0, 0.5, 1.0, 2.0, 4.0)
     },
     "se-zero": ("agents.dgpt:DGPT", {"window": 3, "mean": "zero"}),
     "se-zero-loose": (
@@ -627,7 +628,7 @@ def main(argv=None) -> int:
         "candidate        cell                rmse_2d  det  gap  nrmse%  nees_med_det  cov3_det%"
         "  ms  bound%  ucb%  ucb/rmse"
     )
-    totals = collections.defaultdict(list)
+    totals, anees = collections.defaultdict(list), collections.defaultdict(list)
     for (name, scenario, trajectory, clutter), rows in by_cell.items():
         nrmse = 50 * (mean(rows, "nrmse_x") + mean(rows, "nrmse_y"))
         coverage = 50 * (
@@ -652,10 +653,11 @@ def main(argv=None) -> int:
         totals[name].append(
             (trajectory, rmse, nrmse, nees, coverage, at_bound, ucb_coverage, ucb_ratio)
         )
+        anees[name].extend(row["anees_detected"] for row in rows)
     print()
     print(
         "candidate        rmse fixed  rmse random  nrmse%  nees_med_det  cov3_det%  bound%"
-        "  ucb%  ucb/rmse"
+        "  ucb%  ucb/rmse  anees_det median / max"
     )
     for name, cells in totals.items():
         fixed, random = (
@@ -666,6 +668,7 @@ def main(argv=None) -> int:
         print(
             f"{name:16s} {fixed:10.2f} {random:12.2f} {rest[0]:7.2f} {rest[1]:12.3f}"
             f" {rest[2]:10.2f} {rest[3]:7.1f} {rest[4]:5.2f} {rest[5]:9.2f}"
+            f"  {np.nanmedian(anees[name]):.2f} / {np.nanmax(anees[name]):.3g}"
         )
     if args.paired_against:
         print_paired(runs, args.paired_against, args.trajectories)
