@@ -19,7 +19,7 @@ Centralized: one filter processes every sensor's measurements. State per particl
   (:func:`least_position_variance`): when the weights have degenerated onto a few
   particles, their weighted covariance, and with it Silverman's kernel, is about 0, and
   without the floor the resampled cloud collapses onto one point and reports a variance
-  near 0 (dgpt-gym before 0.25.0: the episodes' ANEES on sensed steps up to 4e7).
+  near 0 (dgpt-gym before 0.25.0: the episodes' ANEES on sensed steps up to 5e7).
 
 Initialisation (first step with measurements): positions are drawn around the
 measurements (each particle picks one at random and adds N(0, sigma_z^2 I)), velocities

@@ -592,13 +592,13 @@ def test_cpf_kernel_floor_keeps_a_degenerate_cloud_from_collapsing():
     )
 
 
-@pytest.mark.parametrize("n_measurements", [1, 5])
-def test_cpf_update_floors_the_kernel_with_the_steps_measurement_count(n_measurements):
+@pytest.mark.parametrize("n_measurements, noise_std", [(1, 1.0), (5, 1.0), (5, 4.0)])
+def test_cpf_update_floors_the_kernel_with_the_steps_measurement_count(n_measurements, noise_std):
     """One particle, where the step's measurements are, holds all but e^-1000 of the weight
     and the rest lie 100 m away: the update resamples, and the cloud's position sd per axis
-    is the default floor for that many measurements, 1 / sqrt(1 + m) on S1 (q = 1,
-    sigma_z 1), within 5 % (3 standard errors of a 2000-draw sd: 1.6 % each)."""
-    env = gym.make("DGPTrack-v0", scenario="S1")
+    is the default floor for that many measurements, 1 / sqrt(1 + m / sigma_z^2) on S1
+    (q = 1), within 5 % (3 standard errors of a 2000-draw sd: 1.6 % each)."""
+    env = gym.make("DGPTrack-v0", scenario="S1", noise_std=noise_std)
     tracker = MultipleModelCPF()
     tracker.reset(env.reset(seed=0)[1]["problem_spec"], seed=0)
     rng = np.random.default_rng(2)
@@ -609,7 +609,9 @@ def test_cpf_update_floors_the_kernel_with_the_steps_measurement_count(n_measure
     tracker.log_weights_ = np.r_[0.0, np.full(1999, -1000.0)]
     tracker._update(rng.normal(0.0, 0.01, (n_measurements, 2)))
     np.testing.assert_allclose(
-        tracker.particles_[:, [0, 2]].std(axis=0), (1.0 + n_measurements) ** -0.5, rtol=0.05
+        tracker.particles_[:, [0, 2]].std(axis=0),
+        (1.0 + n_measurements / noise_std**2) ** -0.5,
+        rtol=0.05,
     )
 
 
