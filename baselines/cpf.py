@@ -100,7 +100,9 @@ def least_position_variance(
     variance the step's acceleration noise adds. Given the previous state, the mode and the
     association the posterior is Gaussian with at least this variance (all m measurements
     the target's); by the law of total variance the posterior, a mixture over those, varies
-    at least as much. 0 without acceleration noise."""
+    at least as much. 0 without acceleration noise; ``noise_std`` must be positive (the
+    filter passes the spec's ``model_noise_std``, floored at 1 mm)."""
+    check_real("noise_std", noise_std, low=0.0, low_inclusive=False)
     q = (0.5 * dt**2 * acceleration_std) ** 2
     if q == 0.0:
         return 0.0

@@ -563,6 +563,8 @@ def test_least_position_variance_by_hand():
     assert least_position_variance(2.0, 1.0, 4.0, 8) == pytest.approx(4.0 / 3.0, rel=1e-15)
     assert least_position_variance(1.0, 2.0, 1.0, 0) == 1.0  # no measurement: q itself
     assert least_position_variance(1.0, 0.0, 1.0, 3) == 0.0  # no process noise
+    with pytest.raises(ValueError, match="noise_std"):
+        least_position_variance(1.0, 2.0, 0.0, 3)
 
 
 def test_cpf_kernel_floor_keeps_a_degenerate_cloud_from_collapsing():
