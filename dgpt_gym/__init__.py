@@ -17,6 +17,7 @@ from dgpt_gym.env import DGPTrackEnv
 from dgpt_gym.problem import ProblemSpec
 from dgpt_gym.registry import load_table, make_tracker, register_tracker, tracker_ids
 from dgpt_gym.scenarios import SCENARIOS, get_scenario
+from dgpt_gym.tracker import Estimate, TrackerBase
 
 RL_ENVIRONMENT_TABLE = "agents.rl.registration:ENVIRONMENTS"
 """Where the RL environments' Gymnasium ids are declared (beside their code)."""
@@ -28,6 +29,8 @@ except PackageNotFoundError:  # running from a source tree without installation
 
 __all__ = [
     "DGPTrackEnv",
+    "Estimate",
+    "TrackerBase",
     "ProblemSpec",
     "SCENARIOS",
     "get_scenario",

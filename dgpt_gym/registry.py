@@ -19,9 +19,13 @@ Two ways in for a user's own tracker, besides :func:`register_tracker`:
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib
+import importlib.util
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
+from pathlib import Path
 
 __all__ = [
     "TrackerSpec",
@@ -32,6 +36,8 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "BUILTIN_TRACKER_TABLES",
     "load_table",
+    "source_digest",
+    "PROJECT_PACKAGES",
 ]
 
 ENTRY_POINT_GROUP = "dgpt_gym.trackers"
@@ -43,6 +49,28 @@ BUILTIN_TRACKER_TABLES = ("agents.registration:TRACKERS", "baselines.registratio
 RENAMED_TABLE = "agents.registration:RENAMED"
 """Ids that earlier versions used, ``{old id: new id}``: asked for one, the registry says
 what it is called now."""
+
+
+PROJECT_PACKAGES = ("agents", "baselines", "dgpt_gym")
+"""The packages this project ships: the dgpt-gym version identifies their code."""
+
+
+@functools.cache
+def source_digest(entry_point: str) -> str | None:
+    """A SHA-256 of the source file of the module that ``entry_point`` (``"module:Class"``)
+    names, or None for the project's own packages (:data:`PROJECT_PACKAGES`), whose code
+    the dgpt-gym version identifies. The evaluation's results store puts it in the run's
+    key, so that editing one's own tracker runs it again instead of reading the runs of the
+    code before the edit. Only the class's own module is read (not the modules it imports),
+    once per process; None too when the module has no source file."""
+    module_name = entry_point.partition(":")[0]
+    if module_name.partition(".")[0] in PROJECT_PACKAGES:
+        return None
+    found = importlib.util.find_spec(module_name)
+    origin = None if found is None else found.origin
+    if origin is None or not Path(origin).is_file():
+        return None
+    return hashlib.sha256(Path(origin).read_bytes()).hexdigest()
 
 
 def load_table(location: str):

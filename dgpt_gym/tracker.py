@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import abc
 import copy
+import inspect
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -13,7 +15,7 @@ import numpy as np
 
 from dgpt_gym.problem import ProblemSpec
 
-__all__ = ["Estimate", "Tracker", "TrackerBase"]
+__all__ = ["Estimate", "Tracker", "TrackerBase", "check_estimate", "check_reset_signature"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,61 @@ class Estimate:
         """The answer before any measurement: the area's centre, with the per-axis variance
         of a position uniform over the area (area^2 / 12)."""
         return cls(np.full(2, spec.area / 2.0), np.full(2, spec.area**2 / 12.0))
+
+
+def check_estimate(estimate, tracker) -> None:
+    """Raise a ``TypeError`` or ``ValueError`` that names ``tracker``'s ``update`` unless
+    ``estimate`` is what the evaluation can score: an :class:`Estimate` whose ``mean`` is a
+    finite (2,) position, whose ``var`` is a (2,) per-axis variance (not negative; NaN for a
+    tracker that reports none: its calibration is left out), and whose ``ucb`` is None or a
+    (2,) half-width that is not negative. Without this, a wrong shape fails later in the
+    metrics, and a negative variance passes unnoticed. Called on every step of every
+    episode, so it reads the two entries directly rather than through array reductions."""
+    if not isinstance(estimate, Estimate):
+        raise TypeError(
+            f"{type(tracker).__name__}.update must return a dgpt_gym.tracker.Estimate"
+            f"(mean, var, ucb=None); got {type(estimate).__name__}"
+        )
+    mean = _pair(estimate.mean)
+    if mean is None or not (math.isfinite(mean[0]) and math.isfinite(mean[1])):
+        _bad_estimate(tracker, "mean", "a finite (2,) position (x, y)", estimate.mean)
+    var = _pair(estimate.var)
+    if var is None or var[0] < 0 or var[1] < 0:
+        _bad_estimate(tracker, "var", _NOT_NEGATIVE.format("per-axis variance"), estimate.var)
+    if estimate.ucb is not None:
+        ucb = _pair(estimate.ucb)
+        if ucb is None or ucb[0] < 0 or ucb[1] < 0:
+            what = _NOT_NEGATIVE.format("per-axis half-width") + " or None"
+            _bad_estimate(tracker, "ucb", what, estimate.ucb)
+
+
+_NOT_NEGATIVE = "a (2,) {}, not negative (NaN: none reported)"
+
+
+def _pair(value) -> np.ndarray | None:
+    """``value`` as a (2,) real array, or None when it is not one."""
+    array = value if type(value) is np.ndarray else np.asarray(value)
+    if array.shape != (2,) or array.dtype.kind not in "fiu":
+        return None
+    return array
+
+
+def _bad_estimate(tracker, name: str, allowed: str, value) -> None:
+    raise ValueError(
+        f"{type(tracker).__name__}.update must return Estimate.{name} as {allowed}; got {value!r}"
+    )
+
+
+def check_reset_signature(tracker) -> None:
+    """Raise a ``TypeError`` naming ``tracker``'s ``reset`` unless it takes the call the
+    evaluation makes, ``reset(spec, seed=seed)``."""
+    try:
+        inspect.signature(tracker.reset).bind(None, seed=0)
+    except TypeError as error:
+        raise TypeError(
+            f"{type(tracker).__name__}.reset must take reset(spec, seed=None): the "
+            f"evaluation passes each episode's seed by keyword ({error})"
+        ) from None
 
 
 @runtime_checkable

@@ -3,7 +3,7 @@
 With no options it runs the quick grid (S1-S4, clutter rates 1 and 5, sigma_z = 1, 10 runs of
 the trackers of :data:`dgpt_gym.benchmark.sweep.QUICK_SWEEP`: the standard GP, DGPT-RBCM and
 DGPT-GPoE, the pooled-trend DGPT-RBCM, the hybrid
-filter around each DGPT-RBCM, the CPF, the IMM-PDA and the clairvoyant floor; about a minute
+filter around each DGPT-RBCM, the CPF, the IMM-PDA and the clairvoyant floor; 1-2 minutes
 on 2 cores) and prints a table per cell: NRMSE with its 95 %
 interval over runs beside the paper's value, RMSE, the ratio to the clairvoyant floor, ANEES,
 3-sigma coverage and track loss. --trajectory random and --layout per_episode run the grid
@@ -56,7 +56,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    grid = parser.add_argument_group("the grid (ignored with --paper)")
+    grid = parser.add_argument_group("the grid (ignored with --paper, but for --runs)")
     grid.add_argument(
         "--trackers",
         nargs="+",
@@ -305,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {path}")
             return 0
         grids = build_grids(args)
-    except ValueError as error:
+    except (ValueError, TypeError) as error:  # TypeError: a tracker that cannot be built
         print(f"error: {error}", file=sys.stderr)
         return 2
     out = args.out or Path("results") / ("paper" if args.paper else "quick")

@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 
 from dgpt_gym.benchmark import metrics
 from dgpt_gym.benchmark.report import paper_value
+from dgpt_gym.tracker import check_estimate, check_reset_signature
 
 __all__ = [
     "EpisodeResult",
@@ -166,6 +167,7 @@ def run_episodes(
         )
     observations, truths, records = [], [], []
     for env, tracker, seed in zip(envs, trackers, seeds):
+        check_reset_signature(tracker)
         observation, info = env.reset(seed=seed)
         if is_oracle(tracker):
             tracker.reset(info["problem_spec"], seed=seed, truth=info)
@@ -192,6 +194,7 @@ def run_episodes(
         elapsed = (time.perf_counter() - started) / len(running)
         still_running = []
         for index, estimate in zip(running, estimates):
+            check_estimate(estimate, trackers[index])
             record, observation = records[index], observations[index]
             record.step_time.append(elapsed)
             record.mean.append(estimate.mean)

@@ -2,7 +2,8 @@
 
 Every finished (cell, seed, tracker) run is one row, committed as soon as the run finishes,
 so an interrupted sweep (Ctrl-C, a killed process) loses no finished row. The row's key is a
-hash of its whole configuration (tracker id and arguments, environment arguments, seed):
+hash of its whole configuration (tracker id and arguments, environment arguments, seed,
+and the source of a tracker from outside the project):
 re-running a sweep skips the keys already stored with status ``"ok"`` by the same dgpt-gym
 version and never duplicates one. Failed runs, and runs of another version (whose numbers
 may differ), are run again and replaced.
@@ -46,10 +47,16 @@ def _canonical(value) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"))
 
 
-def run_key(tracker: str, tracker_kwargs: dict, env_kwargs: dict, seed: int) -> str:
-    """The identity of a run: a SHA-256 of its canonical JSON configuration."""
-    text = _canonical([tracker, tracker_kwargs, env_kwargs, int(seed)])
-    return hashlib.sha256(text.encode()).hexdigest()
+def run_key(
+    tracker: str, tracker_kwargs: dict, env_kwargs: dict, seed: int, source: str | None = None
+) -> str:
+    """The identity of a run: a SHA-256 of its canonical JSON configuration, and of
+    ``source``, the digest of a user tracker's code (:func:`dgpt_gym.registry.source_digest`;
+    None for the project's trackers, whose keys are then those of earlier versions)."""
+    configuration = [tracker, tracker_kwargs, env_kwargs, int(seed)]
+    if source is not None:
+        configuration.append(source)
+    return hashlib.sha256(_canonical(configuration).encode()).hexdigest()
 
 
 class ResultsStore:

@@ -37,8 +37,9 @@ from dgpt_gym.benchmark.protocol import PAPER_AS_PRINTED_TRACKERS, PAPER_GP_TRAC
 from dgpt_gym.benchmark.store import ResultsStore, run_key
 from dgpt_gym.benchmark.windows import tuned_kwargs
 from dgpt_gym.env import LAYOUT_MODES, TRAJECTORY_MODES
-from dgpt_gym.registry import TrackerSpec, tracker_ids, tracker_spec
+from dgpt_gym.registry import TrackerSpec, source_digest, tracker_ids, tracker_spec
 from dgpt_gym.scenarios import get_scenario
+from dgpt_gym.tracker import check_reset_signature
 from dgpt_gym.validation import check_choice, check_integer, check_real
 
 __all__ = [
@@ -86,13 +87,40 @@ class RunUnit:
 
     @property
     def key(self) -> str:
-        return run_key(self.tracker, self.tracker_kwargs, self.env_kwargs, self.seed)
+        return run_key(
+            self.tracker,
+            self.tracker_kwargs,
+            self.env_kwargs,
+            self.seed,
+            source_digest(self.entry_point),
+        )
 
     @property
     def cell(self) -> tuple[str, str, float, float]:
         """(tracker, scenario, noise_std, clutter_rate)."""
         env = self.env_kwargs
         return (self.tracker, env["scenario"], env["noise_std"], env["clutter_rate"])
+
+
+def check_buildable(id: str, overrides: dict | None = None) -> None:
+    """Build one tracker ``id`` (with ``overrides`` of its registered arguments) and check
+    its ``reset`` signature, so that what would fail every run of a sweep fails once, here,
+    with a ``ValueError`` or ``TypeError`` naming the tracker: an unknown id, a missing
+    optional dependency, an argument the class does not take or needs."""
+    spec = tracker_spec(id)
+    try:
+        make = spec.load()
+    except ImportError as error:
+        raise ValueError(f"tracker {id!r} cannot be imported: {error}") from None
+    kwargs = {**spec.kwargs, **(overrides or {})}
+    try:
+        tracker = make(**kwargs)
+    except TypeError as error:
+        hint = "; a class named by its path is built without arguments" if ":" in id else ""
+        raise TypeError(
+            f"tracker {id!r} cannot be built with the arguments {kwargs}: {error}{hint}"
+        ) from None
+    check_reset_signature(tracker)
 
 
 @dataclass(frozen=True)
@@ -115,10 +143,7 @@ class Variant:
                 f"name must not be a registered tracker id (its runs would be reported as "
                 f"that tracker's); got {self.name!r}"
             )
-        spec = tracker_spec(self.base)
-        # build one tracker now, so that an unknown or invalid argument fails here and not
-        # in every run of the sweep
-        spec.load()(**{**spec.kwargs, **dict(self.overrides)})
+        check_buildable(self.base, dict(self.overrides))
 
 
 @dataclass(frozen=True)
@@ -153,7 +178,7 @@ class Grid:
                 )
         for tracker in self.trackers:
             if not isinstance(tracker, Variant):
-                tracker_spec(tracker)
+                check_buildable(tracker)
         for scenario in self.scenarios:
             get_scenario(scenario)
         for noise in self.noise_levels:
