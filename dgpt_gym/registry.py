@@ -22,10 +22,10 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib
-import importlib.util
+import inspect
+import os
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from pathlib import Path
 
 __all__ = [
     "TrackerSpec",
@@ -55,22 +55,39 @@ PROJECT_PACKAGES = ("agents", "baselines", "dgpt_gym")
 """The packages this project ships: the dgpt-gym version identifies their code."""
 
 
-@functools.cache
 def source_digest(entry_point: str) -> str | None:
-    """A SHA-256 of the source file of the module that ``entry_point`` (``"module:Class"``)
-    names, or None for the project's own packages (:data:`PROJECT_PACKAGES`), whose code
-    the dgpt-gym version identifies. The evaluation's results store puts it in the run's
-    key, so that editing one's own tracker runs it again instead of reading the runs of the
-    code before the edit. Only the class's own module is read (not the modules it imports),
-    once per process; None too when the module has no source file."""
-    module_name = entry_point.partition(":")[0]
-    if module_name.partition(".")[0] in PROJECT_PACKAGES:
+    """A SHA-256 of the source file that defines the class ``entry_point``
+    (``"module:Class"``) names, or None for the project's own packages
+    (:data:`PROJECT_PACKAGES`), whose code the dgpt-gym version identifies. The evaluation's
+    results store puts it in the run's key, so that editing one's own tracker runs it again
+    instead of reading the runs of the code before the edit. Only that file is read, not
+    the modules it imports; it is read again when its modification time or size changes.
+    None too when the class has no source file (e.g. defined at an interactive prompt)."""
+    if entry_point.partition(":")[0].partition(".")[0] in PROJECT_PACKAGES:
         return None
-    found = importlib.util.find_spec(module_name)
-    origin = None if found is None else found.origin
-    if origin is None or not Path(origin).is_file():
+    path = _source_file(entry_point)
+    if path is None:
         return None
-    return hashlib.sha256(Path(origin).read_bytes()).hexdigest()
+    try:
+        status = os.stat(path)
+    except OSError:
+        return None
+    return _file_digest(path, status.st_mtime_ns, status.st_size)
+
+
+@functools.cache
+def _source_file(entry_point: str) -> str | None:
+    try:
+        return inspect.getsourcefile(load_table(entry_point))
+    except (ImportError, AttributeError, TypeError, OSError, ValueError):
+        return None
+
+
+@functools.cache
+def _file_digest(path: str, modified_ns: int, size: int) -> str:
+    """The file's SHA-256; the modification time and size key the cache."""
+    with open(path, "rb") as source:
+        return hashlib.sha256(source.read()).hexdigest()
 
 
 def load_table(location: str):

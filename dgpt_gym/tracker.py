@@ -87,9 +87,17 @@ def _bad_estimate(tracker, name: str, allowed: str, value) -> None:
 
 def check_reset_signature(tracker) -> None:
     """Raise a ``TypeError`` naming ``tracker``'s ``reset`` unless it takes the call the
-    evaluation makes, ``reset(spec, seed=seed)``."""
+    evaluation makes, ``reset(spec, seed=seed)`` (and ``truth=`` for a reset that has it: an
+    oracle's). A ``reset`` without a signature to read (compiled code) is not checked."""
     try:
-        inspect.signature(tracker.reset).bind(None, seed=0)
+        signature = inspect.signature(tracker.reset)
+    except (TypeError, ValueError):
+        return
+    call = {"seed": 0}
+    if "truth" in signature.parameters:
+        call["truth"] = None
+    try:
+        signature.bind(None, **call)
     except TypeError as error:
         raise TypeError(
             f"{type(tracker).__name__}.reset must take reset(spec, seed=None): the "

@@ -305,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {path}")
             return 0
         grids = build_grids(args)
-    except (ValueError, TypeError) as error:  # TypeError: a tracker that cannot be built
+    except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     out = args.out or Path("results") / ("paper" if args.paper else "quick")

@@ -113,8 +113,15 @@ def nrmse(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 
 def coverage(estimates: np.ndarray, truth: np.ndarray, half_width: np.ndarray) -> np.ndarray:
-    """Fraction of steps with ``|estimate - truth| <= half_width``, per axis (UCB or CI coverage)."""
-    return np.mean(np.abs(np.asarray(estimates) - np.asarray(truth)) <= half_width, axis=0)
+    """Fraction of steps with ``|estimate - truth| <= half_width``, per axis (UCB or CI
+    coverage), over the steps with a half-width: a NaN one (from a NaN variance, a tracker
+    that reports none) is left out, and an axis without any is NaN, not 0."""
+    inside = np.abs(np.asarray(estimates) - np.asarray(truth)) <= half_width
+    reported = np.broadcast_to(~np.isnan(half_width), inside.shape)
+    if reported.all():
+        return np.mean(inside, axis=0)
+    with np.errstate(invalid="ignore"):  # 0 / 0: no step reported one
+        return np.sum(inside & reported, axis=0) / np.sum(reported, axis=0)
 
 
 def mean_width(half_width: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ learning and prediction over episodes without changing any run's numbers, which
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import time
@@ -105,22 +106,33 @@ class RunUnit:
 def check_buildable(id: str, overrides: dict | None = None) -> None:
     """Build one tracker ``id`` (with ``overrides`` of its registered arguments) and check
     its ``reset`` signature, so that what would fail every run of a sweep fails once, here,
-    with a ``ValueError`` or ``TypeError`` naming the tracker: an unknown id, a missing
-    optional dependency, an argument the class does not take or needs."""
+    with a ``ValueError`` naming the tracker and why: an unknown id, a module or class that
+    cannot be loaded (e.g. a missing optional dependency), arguments the class does not take
+    or needs, a ``reset`` without ``seed=``. An error inside the constructor itself
+    propagates as it is."""
     spec = tracker_spec(id)
     try:
         make = spec.load()
-    except ImportError as error:
-        raise ValueError(f"tracker {id!r} cannot be imported: {error}") from None
+    except (ImportError, AttributeError) as error:
+        raise ValueError(f"tracker {id!r} cannot be loaded: {error}") from error
     kwargs = {**spec.kwargs, **(overrides or {})}
     try:
-        tracker = make(**kwargs)
+        signature = inspect.signature(make)
+    except (TypeError, ValueError):  # no signature to read: the call below tells
+        signature = None
+    if signature is not None:
+        try:
+            signature.bind(**kwargs)
+        except TypeError as error:
+            hint = "; a class named by its path is built without arguments" if ":" in id else ""
+            raise ValueError(
+                f"tracker {id!r} cannot be built with the arguments {kwargs}: {error}{hint}"
+            ) from error
+    tracker = make(**kwargs)
+    try:
+        check_reset_signature(tracker)
     except TypeError as error:
-        hint = "; a class named by its path is built without arguments" if ":" in id else ""
-        raise TypeError(
-            f"tracker {id!r} cannot be built with the arguments {kwargs}: {error}{hint}"
-        ) from None
-    check_reset_signature(tracker)
+        raise ValueError(f"tracker {id!r}: {error}") from error
 
 
 @dataclass(frozen=True)
@@ -242,7 +254,7 @@ QUICK_SWEEP = (
         runs=10,
     ),
 )
-"""``scripts/evaluate.py`` with no options (and ``make evaluate``): about a minute on 2
+"""``scripts/evaluate.py`` with no options (and ``make evaluate``): 1-2 minutes on 2
 cores. The paper's approaches with the default model (the NCV GP in state-space form,
 conditioned on the silence of the sensors in coverage gaps), the pooled SE trend of dgpt-gym
 0.8 (``-trend``), the hybrid filter around each DGPT-RBCM, the

@@ -302,7 +302,7 @@ def test_a_variant_runs_its_base_with_the_overrides_under_its_own_name(tmp_path)
 def test_variants_validate_their_name_and_arguments():
     with pytest.raises(ValueError, match="registered tracker id.*'pda'"):
         Variant("pda", "centroid", (("gate_radius", 10.0),))
-    with pytest.raises(TypeError, match="gate_width"):
+    with pytest.raises(ValueError, match="cannot be built .*gate_width"):
         Variant("centroid/x", "centroid", (("gate_width", 10.0),))
     with pytest.raises(ValueError, match="gate_radius"):
         Variant("centroid/x", "centroid", (("gate_radius", -1.0),))
