@@ -206,6 +206,9 @@ def test_bad_evaluate_arguments(argv, name, tmp_path, capsys):
     assert _exit_code(evaluate_cli.main, [*base, *argv]) == 2
     error = capsys.readouterr().err
     assert name in error and "error:" in error and "Traceback" not in error
+    if name in evaluate_cli.OPTION_OF_ARGUMENT:  # the option the user typed is named too
+        assert f"(option {evaluate_cli.OPTION_OF_ARGUMENT[name]})" in error
+        assert evaluate_cli.OPTION_OF_ARGUMENT[name] in " ".join(argv)
 
 
 def test_evaluate_explains_a_file_and_a_corrupt_store_given_as_out(tmp_path, capsys):

@@ -218,6 +218,29 @@ def with_inputs(trackers: list[str], inputs: list[str]) -> list[str]:
     return list(dict.fromkeys(ids))
 
 
+OPTION_OF_ARGUMENT = {
+    "scenario": "--scenarios",
+    "noise_std": "--noise-std",
+    "clutter_rate": "--clutter-rates",
+    "runs": "--runs",
+    "first_seed": "--seed",
+    "workers": "--workers",
+    "batch_size": "--batch-size",
+    "count": "--verify",
+    "scheduler": "--scheduler",
+}
+"""The command-line option behind each argument name that the library's errors use."""
+
+
+def with_option(error: Exception) -> str:
+    """The error's message, naming the option too when it starts with an argument's name
+    (the library's checks name ``clutter_rate``; the user typed ``--clutter-rates``)."""
+    message = str(error)
+    name = message.split(" ", 1)[0]
+    option = OPTION_OF_ARGUMENT.get(name)
+    return message if option is None else f"{message} (option {option})"
+
+
 def build_grids(args: argparse.Namespace) -> list[Grid]:
     if args.paper and (args.trajectory, args.layout) != ("fixed", "fixed"):
         raise ValueError(
@@ -255,7 +278,7 @@ def verify(grids: list[Grid], out: Path, args: argparse.Namespace) -> int:
             batch_size=args.batch_size,
         )
     except ValueError as error:  # a bad N or --workers, or an empty store
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {with_option(error)}", file=sys.stderr)
         return 2
     for line in report.mismatches:
         print(f"  differs: {line}")
@@ -306,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         grids = build_grids(args)
     except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {with_option(error)}", file=sys.stderr)
         return 2
     out = args.out or Path("results") / ("paper" if args.paper else "quick")
     if args.verify is not None:
@@ -322,13 +345,13 @@ def main(argv: list[str] | None = None) -> int:
                 batch_size=args.batch_size,
             )
         except ValueError as error:  # a bad --workers, --batch-size or --out
-            print(f"error: {error}", file=sys.stderr)
+            print(f"error: {with_option(error)}", file=sys.stderr)
             return 2
         except OSError as error:  # the store's folder is read-only or full
             print(f"error: cannot write to {out}: {error}", file=sys.stderr)
             return 1
         except ImportError as error:  # --scheduler without the cluster extra
-            print(f"error: {error}", file=sys.stderr)
+            print(f"error: {with_option(error)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print(
@@ -348,7 +371,7 @@ def main(argv: list[str] | None = None) -> int:
             grids, out, args.report_dir, command.strip(), DOCS / "training_time.csv"
         )
     except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {with_option(error)}", file=sys.stderr)
         return 1
     except OSError as error:  # the report folder is read-only or full
         print(
