@@ -11,7 +11,9 @@ RMSE, like the trackers'), the first step at which its error is below 3 m (media
 episodes), its largest posterior standard deviation at the horizon (m; small means the
 horizon was long enough), the least effective number of its draws on the steps where its
 posterior's standard deviation exceeds 3 m (the ambiguous ones), the tracker's RMSE in
-both modes, their ratio, and the floor's RMSE over the tracker's detecting one. Where that
+both modes, their ratio, the floor's RMSE over the tracker's detecting one, and where the
+tracker's squared error with clutter at every sensor lies (:func:`error_parts`: before its
+track first holds, in or just after a coverage gap, elsewhere). Where the floor's ratio
 exceeds 2, no tracker can be expected to meet the goal "all at most twice detecting" (on
 random paths the floor is the least mean-squared error given the shape and the scans);
 where it does not, the goal is not ruled out. The floor's prior on the start is the
@@ -19,6 +21,7 @@ scenario's law given the shape (:func:`baselines.shape_floor.start_box`).
 
     python scripts/all_clutter_floor.py                        # seeds 0-29, clutter 1
     python scripts/all_clutter_floor.py --seeds 4 --tracker gp --first-seed 1000
+    python scripts/all_clutter_floor.py --first-seed 1000 --seeds 12 --no-floor
 """
 
 from __future__ import annotations
@@ -78,6 +81,31 @@ def floor_errors(env, seed: int, horizon: int, draws: int) -> tuple[np.ndarray, 
     return errors, float(spread[-1]), least_ess
 
 
+HELD_M, HELD_STEPS, AFTER_GAP_STEPS = 10.0, 3, 10
+"""The track first holds at the first of ``HELD_STEPS`` steps in a row with an error below
+``HELD_M``; a step is near a gap if some sensor-less step (no sensor senses the target) is
+among it and the ``AFTER_GAP_STEPS`` steps before it."""
+
+
+def error_parts(result) -> np.ndarray:
+    """An episode's squared 2-D errors summed over three sets of steps: before the track
+    first holds, near a coverage gap after that (:data:`HELD_M`), and the rest."""
+    squared = np.sum((result.mean - result.truth) ** 2, axis=1)
+    below = (np.sqrt(squared) < HELD_M).astype(int)
+    held = np.convolve(below, np.ones(HELD_STEPS, dtype=int), "valid") == HELD_STEPS
+    first_held = int(np.argmax(held)) if held.any() else squared.size
+    gap = (result.n_detecting == 0).astype(int)
+    near_gap = np.convolve(gap, np.ones(AFTER_GAP_STEPS + 1, dtype=int))[: gap.size] > 0
+    before = np.arange(squared.size) < first_held
+    return np.array(
+        [
+            squared[before].sum(),
+            squared[~before & near_gap].sum(),
+            squared[~before & ~near_gap].sum(),
+        ]
+    )
+
+
 def make_env(scenario: str, trajectory: str, clutter_rate: float, clutter_sensors: str):
     return gymnasium.make(
         "DGPTrack-v0",
@@ -102,6 +130,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--trajectories", nargs="+", default=TRAJECTORIES, choices=TRAJECTORIES, metavar="PATH"
     )
+    parser.add_argument(
+        "--no-floor", action="store_true", help="run the tracker alone (the floor's columns: -)"
+    )
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.horizon < 1 or args.draws < 3:
@@ -113,14 +144,15 @@ def main(argv: list[str] | None = None) -> None:
     )
     print(
         "cell          floor RMSE  floor <3 m at  floor sd  min ESS   all RMSE  detecting"
-        "  all/det  floor/det"
+        "  all/det  floor/det  all: % of squared error before the track holds / near gaps"
+        " / elsewhere"
     )
     cells = [(s, p) for s in args.scenarios for p in args.trajectories]
     bar = tqdm(total=len(cells) * len(seeds), disable=args.no_progress, desc="episodes")
     for scenario, trajectory in cells:
         floor_env = make_env(scenario, trajectory, args.clutter_rate, "all")
         floor_rmse, resolved, spread, least_ess = [], [], [], []
-        for seed in seeds:
+        for seed in [] if args.no_floor else seeds:
             errors, sd, ess = floor_errors(floor_env, seed, args.horizon, args.draws)
             n_steps = floor_env.unwrapped.n_steps
             floor_rmse.append(np.sqrt(errors.sum() / n_steps))
@@ -135,18 +167,30 @@ def main(argv: list[str] | None = None) -> None:
             trackers = [make_tracker(args.tracker) for _ in seeds]
             results = run_episodes(envs, trackers, seeds)
             tracker_rmse[mode] = np.array([r.metrics()["rmse_2d"] for r in results])
+            if mode == "all":
+                parts = sum(error_parts(result) for result in results)
+                shares = " / ".join(f"{share:.0f}" for share in 100 * parts / parts.sum())
+            if args.no_floor:
+                bar.update(len(seeds) // 2 if mode == "all" else len(seeds) - len(seeds) // 2)
 
-        floor, all_, detecting = (
-            root_mean_square(floor_rmse),
+        all_, detecting = (
             root_mean_square(tracker_rmse["all"]),
             root_mean_square(tracker_rmse["detecting"]),
         )
-        ambiguous = [value for value in least_ess if not np.isnan(value)]
-        least = f"{min(ambiguous):7.0f}" if ambiguous else "      -"
+        if args.no_floor:
+            floor_columns = f"{'-':>10s}  {'-':>13s}  {'-':>8s}  {'-':>7s}"
+            floor_ratio = f"{'-':>9s}"
+        else:
+            floor = root_mean_square(floor_rmse)
+            ambiguous = [value for value in least_ess if not np.isnan(value)]
+            least = f"{min(ambiguous):7.0f}" if ambiguous else "      -"
+            floor_columns = (
+                f"{floor:10.2f}  {np.median(resolved):13.1f}  {max(spread):8.2f}  {least}"
+            )
+            floor_ratio = f"{floor / detecting:9.2f}"
         print(
-            f"{scenario} {trajectory:6s}  {floor:10.2f}  {np.median(resolved):13.1f}"
-            f"  {max(spread):8.2f}  {least}  {all_:9.2f}  {detecting:9.2f}"
-            f"  {all_ / detecting:7.2f}  {floor / detecting:9.2f}",
+            f"{scenario} {trajectory:6s}  {floor_columns}  {all_:9.2f}  {detecting:9.2f}"
+            f"  {all_ / detecting:7.2f}  {floor_ratio}  {shares}",
             flush=True,
         )
     bar.close()

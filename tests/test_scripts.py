@@ -956,3 +956,23 @@ def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
     # 2 trackers x 8 cells x 1 seed in each mode
     assert "fixed paths: 16 runs" in result.stdout and "random paths: 16 runs" in result.stdout
     assert (tmp_path / "report.md").read_text().count("| `dgpt-rbcm/no-learning` |") == 3
+
+
+def test_all_clutter_error_parts_by_hand():
+    """An episode of 20 steps: errors 30 m on steps 0-1 (before the track holds at step 2),
+    a coverage gap on step 8 with 20 m errors on steps 9 and 19 (19 is 11 steps after the
+    gap: elsewhere; 18 is the last step near it), 1 m otherwise."""
+    module = load_script("all_clutter_floor")
+    error = np.ones(20)
+    error[[0, 1]] = 30.0
+    error[[9, 19]] = 20.0
+    detecting = np.full(20, 2)
+    detecting[8] = 0
+    truth = np.zeros((20, 2))
+    result = type("Result", (), {})()
+    result.truth, result.n_detecting = truth, detecting
+    result.mean = np.column_stack([error, np.zeros(20)])
+    before, near_gap, elsewhere = module.error_parts(result)
+    assert before == 2 * 900.0
+    assert near_gap == 400.0 + 10 * 1.0  # step 9, and steps 8 and 10-18
+    assert elsewhere == 400.0 + 6 * 1.0  # step 19, and steps 2-7
