@@ -514,7 +514,13 @@ class ClutterScreen:
     best candidate whose evidence (:func:`initiation_scores`), plus that of a consistent
     candidate of the last step (closer than :data:`MAX_TARGET_SPEED` allows), beats the
     prior odds that a given pair of measurements of the two steps is the target's,
-    1 / (n_t n_(t-1)); the tracker then restarts from the measurements around it.
+    1 / (n_t n_(t-1)); the tracker then restarts from the measurements around it. With
+    ``start_gate`` = g, a track that holds (not searching) starts anew only at a candidate
+    whose squared Mahalanobis distance to the prediction (its variance plus the noise's) is
+    at most g: a target in a coverage gap is unseen, not lost, and a start far from it is
+    most likely at a coincidence of clutter points (docs/analysis.md, "Clutter at every
+    sensor: where the error lies"); once the prediction's standard deviation exceeds the
+    sensing range, or the scans rule out every drawn position, the search is open again.
 
     With ``particles`` = N > 0 (the registered state-space trackers) the sensing probabilities
     are those of all scans together (:func:`joint_sensing_probability`, N positions drawn
@@ -540,9 +546,11 @@ class ClutterScreen:
         admission_probability: float = 0.5,
         particles: int = 0,
         rng: np.random.Generator | None = None,
+        start_gate: float | None = None,
     ) -> None:
         if particles and rng is None:
             raise ValueError("rng must be a numpy Generator when particles > 0")
+        self.start_gate = start_gate
         self.spec = spec
         self.admission_probability = admission_probability
         self.particles = particles
@@ -597,7 +605,10 @@ class ClutterScreen:
         if not self.searching and np.any(keep):
             self.candidates = np.empty((0, 3))
             return keep, False
-        start = self._track_start(points, sensors, awake)
+        gate = None
+        if not self.searching and self.start_gate is not None:
+            gate = (prediction[0], prediction[1] + noise_var)
+        start = self._track_start(points, sensors, awake, gate)
         if start is None:
             return np.zeros(points.shape[0], dtype=bool), False
         self.searching = False
@@ -609,9 +620,11 @@ class ClutterScreen:
         self.searching = False
         self.candidates = np.empty((0, 3))
 
-    def _track_start(self, points, sensors, awake) -> np.ndarray | None:
+    def _track_start(self, points, sensors, awake, gate=None) -> np.ndarray | None:
         """The measurements (boolean (n,)) around the candidate a track starts from, or
-        None; ``candidates`` keeps this step's candidates and their scores for the next."""
+        None; ``candidates`` keeps this step's candidates and their scores for the next.
+        ``gate`` = (mean, var) (2,) each: only candidates within ``start_gate`` of it may
+        start one (every candidate is kept for the next step's consistency either way)."""
         spec = self.spec
         noise_var = spec.model_noise_std**2
         scores, witnesses = initiation_scores(
@@ -636,6 +649,10 @@ class ClutterScreen:
         evidence = scores[candidate] + np.max(
             np.where(consistent, previous[None, :, 2], -np.inf), axis=1
         )
+        if gate is not None:
+            offset = points[candidate] - gate[0]
+            outside = np.sum(offset**2 / gate[1], axis=1) > self.start_gate
+            evidence = np.where(outside, -np.inf, evidence)
         best = int(np.argmax(evidence))
         if evidence[best] <= np.log(points.shape[0]) + np.log(previous_count):
             return None

@@ -596,6 +596,11 @@ class StateSpaceDGPT(TrackerBase):
         admission_probability: with ``clutter_sensors="all"`` only: a reporting sensor's
             measurements are used when its posterior probability of sensing the predicted
             target is at least this (:class:`agents.screening.ClutterScreen`; DGPT's 1/2).
+        start_gate: with ``clutter_sensors="all"`` only: None lets a new track start at any
+            measurement when no reporting sensor is admitted; a number g lets it start, while
+            the track holds, only at a measurement whose squared Mahalanobis distance to the
+            predicted position (the prediction's variance plus the noise's) is at most g
+            (:class:`agents.screening.ClutterScreen`).
         process_noise: q (m^2/s^3) at the first step of an episode, per axis (the learning
             moves it from there), within :data:`PROCESS_NOISE_BOUNDS`.
         learn_process_noise: False keeps q at ``process_noise`` (the ablation "learning
@@ -674,6 +679,7 @@ class StateSpaceDGPT(TrackerBase):
         manoeuvre_intensity: float = MANOEUVRE["intensity"],
         manoeuvre_probability: float = MANOEUVRE["probability"],
         admission_probability: float = 0.5,
+        start_gate: float | None = None,
         process_noise: float = PROCESS_NOISE_START,
         learn_process_noise: bool = True,
         silence_particles: int = 0,
@@ -710,6 +716,9 @@ class StateSpaceDGPT(TrackerBase):
         )
         self.admission_probability = check_real(
             "admission_probability", admission_probability, low=0.0, high=1.0, low_inclusive=False
+        )
+        self.start_gate = (
+            None if start_gate is None else check_real("start_gate", start_gate, low=0.0)
         )
         self.process_noise = check_real(
             "process_noise",
@@ -816,7 +825,11 @@ class StateSpaceDGPT(TrackerBase):
         self.log_q_ = np.full(2, np.log(self.process_noise))
         self.rng_ = np.random.default_rng(seed)  # the gap particles' and the screen's draws
         self.screen_ = ClutterScreen(
-            spec, self.admission_probability, self.silence_particles, self.rng_
+            spec,
+            self.admission_probability,
+            self.silence_particles,
+            self.rng_,
+            start_gate=self.start_gate,
         )
         self.search_ = None  # before the first track, with clutter at every sensor
         if self.search_particles and spec.clutter_sensors == "all" and spec.clutter_rate > 0:

@@ -408,6 +408,20 @@ CANDIDATES = {
         )
         for update in EXPERT_UPDATES
     },
+    # the registered dgpt-rbcm, and with a new track's start gated on the prediction while
+    # the track holds (squared Mahalanobis distance; 9.21 and 18.4: chi-square(2) at 0.99
+    # and 0.9999), with clutter at every sensor
+    "dgpt-rbcm-registered": (
+        "agents.state_space_dgpt:StateSpaceDGPT",
+        {"aggregation": "rbcm", **SEARCHING},
+    ),
+    **{
+        f"dgpt-rbcm-start-gate-{gate:g}": (
+            "agents.state_space_dgpt:StateSpaceDGPT",
+            {"aggregation": "rbcm", **SEARCHING, "start_gate": gate},
+        )
+        for gate in (9.21, 18.4, 50.0)
+    },
     "ss-point-variance": (
         "agents.state_space_dgpt:StateSpaceDGPT",
         {"aggregation": "rbcm", "summary_variance": "point"},

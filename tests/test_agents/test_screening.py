@@ -18,6 +18,7 @@ from scipy import integrate, stats
 import dgpt_gym  # noqa: F401  (registers the environments)
 from agents.dgpt import DGPT
 from agents.screening import (
+    ClutterScreen,
     area_log_likelihood_ratios,
     disc_probability,
     initiation_scores,
@@ -747,3 +748,27 @@ def test_the_estimate_without_a_track_is_calibrated():
     errors, ucbs, stds = np.asarray(errors), np.asarray(ucbs), np.asarray(stds)
     assert np.sum(errors > ucbs) <= 6
     assert 0.60 <= np.mean(errors <= stds) <= 0.80
+
+
+@pytest.mark.parametrize("gate, starts", [(None, True), (18.4, False)])
+def test_a_start_gate_keeps_a_held_track_from_starting_again_far_away(gate, starts):
+    """A track holds with its prediction at (508, 500), variance 6 m^2 per axis, and no
+    sensor near it reports (a target in a gap; the per-sensor screen does not drop a track
+    for that). Sensors 2 and 3 report a strong, consistent pair 92 m away on two steps. No
+    reporting sensor is admitted, so without a gate any candidate may start a track, and
+    the far pair does on its second step. With ``start_gate`` 18.4 (chi-square(2) at
+    0.9999) the pair lies far outside the prediction's gate (a squared Mahalanobis distance
+    of 92^2 / 7 = 1209), and no track starts."""
+    screen = ClutterScreen(problem_spec(SCENE, clutter_sensors="all"), start_gate=gate)
+    screen.searching = False
+    prediction = (np.array([508.0, 500.0]), np.full(2, 6.0))
+    started = []
+    for step in (0, 1):
+        observation = scene_observation(step, PAIR + [100.0, 0.0], target_sensors=(2, 3))
+        keep, start = screen.screen(
+            observation["measurements"], observation["sensor"], prediction, np.ones(2)
+        )
+        assert not keep[2:].any()  # no far clutter point is ever kept
+        started.append(start)
+    assert started == [False, starts]
+    assert not screen.searching  # the held track, or the new one
