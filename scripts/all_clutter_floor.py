@@ -89,7 +89,8 @@ among it and the ``AFTER_GAP_STEPS`` steps before it."""
 
 def error_parts(result) -> np.ndarray:
     """An episode's squared 2-D errors summed over three sets of steps: before the track
-    first holds, near a coverage gap after that (:data:`HELD_M`), and the rest."""
+    first holds, near a coverage gap after that, and the rest (:data:`HELD_M`,
+    :data:`HELD_STEPS`, :data:`AFTER_GAP_STEPS`)."""
     squared = np.sum((result.mean - result.truth) ** 2, axis=1)
     below = (np.sqrt(squared) < HELD_M).astype(int)
     held = np.convolve(below, np.ones(HELD_STEPS, dtype=int), "valid") == HELD_STEPS
@@ -138,9 +139,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.seeds < 1 or args.horizon < 1 or args.draws < 3:
         parser.error("--seeds and --horizon must be at least 1, --draws at least 3")
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    floor_setting = (
+        "no floor" if args.no_floor else f"floor horizon {args.horizon} steps, {args.draws} draws"
+    )
     print(
         f"seeds {seeds[0]}-{seeds[-1]}, clutter rate {args.clutter_rate:g}, sigma_z 1, "
-        f"floor horizon {args.horizon} steps, {args.draws} draws; tracker {args.tracker}"
+        f"{floor_setting}; tracker {args.tracker}"
     )
     print(
         "cell          floor RMSE  floor <3 m at  floor sd  min ESS   all RMSE  detecting"

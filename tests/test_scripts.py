@@ -959,12 +959,14 @@ def test_ablations_runs_an_arm_on_both_path_modes(tmp_path):
 
 
 def test_all_clutter_error_parts_by_hand():
-    """An episode of 20 steps: errors 30 m on steps 0-1 (before the track holds at step 2),
-    a coverage gap on step 8 with 20 m errors on steps 9 and 19 (19 is 11 steps after the
-    gap: elsewhere; 18 is the last step near it), 1 m otherwise."""
+    """An episode of 20 steps: errors 30 m on steps 0-1 and 12 m on step 3, so the track
+    first holds (3 steps in a row below 10 m) at step 4, not at step 2; a coverage gap on
+    step 8 with 20 m errors on steps 9 and 19 (19 is 11 steps after the gap: elsewhere; 18
+    is the last step near it), 1 m otherwise."""
     module = load_script("all_clutter_floor")
     error = np.ones(20)
     error[[0, 1]] = 30.0
+    error[3] = 12.0
     error[[9, 19]] = 20.0
     detecting = np.full(20, 2)
     detecting[8] = 0
@@ -973,6 +975,6 @@ def test_all_clutter_error_parts_by_hand():
     result.truth, result.n_detecting = truth, detecting
     result.mean = np.column_stack([error, np.zeros(20)])
     before, near_gap, elsewhere = module.error_parts(result)
-    assert before == 2 * 900.0
+    assert before == 2 * 900.0 + 1.0 + 144.0  # steps 0-3
     assert near_gap == 400.0 + 10 * 1.0  # step 9, and steps 8 and 10-18
-    assert elsewhere == 400.0 + 6 * 1.0  # step 19, and steps 2-7
+    assert elsewhere == 400.0 + 4 * 1.0  # step 19, and steps 4-7

@@ -750,17 +750,22 @@ def test_the_estimate_without_a_track_is_calibrated():
     assert 0.60 <= np.mean(errors <= stds) <= 0.80
 
 
-@pytest.mark.parametrize("gate, starts", [(None, True), (18.4, False)])
-def test_a_start_gate_keeps_a_held_track_from_starting_again_far_away(gate, starts):
+@pytest.mark.parametrize(
+    "gate, searching, starts",
+    [(None, False, True), (18.4, False, False), (1300.0, False, True), (1150.0, False, False)]
+    + [(18.4, True, True)],
+)
+def test_a_start_gate_keeps_a_held_track_from_starting_again_far_away(gate, searching, starts):
     """A track holds with its prediction at (508, 500), variance 6 m^2 per axis, and no
     sensor near it reports (a target in a gap; the per-sensor screen does not drop a track
     for that). Sensors 2 and 3 report a strong, consistent pair 92 m away on two steps. No
     reporting sensor is admitted, so without a gate any candidate may start a track, and
-    the far pair does on its second step. With ``start_gate`` 18.4 (chi-square(2) at
-    0.9999) the pair lies far outside the prediction's gate (a squared Mahalanobis distance
-    of 92^2 / 7 = 1209), and no track starts."""
+    the far pair does on its second step. Its squared Mahalanobis distance to the prediction
+    with the noise's variance is 92^2 / (6 + 1) = 1209 (1411 without the noise): a gate of
+    18.4 (chi-square(2) at 0.9999) or 1150 keeps the held track, one of 1300 lets the pair
+    start. A screen that is searching (no track holds) is not gated."""
     screen = ClutterScreen(problem_spec(SCENE, clutter_sensors="all"), start_gate=gate)
-    screen.searching = False
+    screen.searching = searching
     prediction = (np.array([508.0, 500.0]), np.full(2, 6.0))
     started = []
     for step in (0, 1):
