@@ -88,6 +88,7 @@ SENSORS_V2_TRACKER_OPTIONS = {
     "gating": True,
     "manoeuvre_intensity": 400.0,
     "admission_probability": 0.5,
+    "start_gate": None,
     "process_noise": 1.0,
     "learn_process_noise": True,
     "turn_process_noise": 5.0,
