@@ -126,6 +126,8 @@ TRACKER_ARGUMENTS = [
     ("dgpt-rbcm-trend", {"gate_threshold": -3.0}, "gate_threshold"),
     ("dgpt-rbcm-trend", {"admission_probability": 0.0}, "admission_probability"),
     ("gp-trend", {"admission_probability": 1.5}, "admission_probability"),
+    ("dgpt-rbcm", {"start_gate": -1.0}, "start_gate"),
+    ("dgpt-rbcm", {"start_gate": float("nan")}, "start_gate"),
     ("gp-trend", {"window": 0}, "window"),
     ("hybrid-trend", {"variant": "x"}, "variant"),
     ("hybrid-trend", {"reacquire": "y"}, "reacquire"),
