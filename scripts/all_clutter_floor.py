@@ -174,8 +174,8 @@ def main(argv: list[str] | None = None) -> None:
             if mode == "all":
                 parts = sum(error_parts(result) for result in results)
                 shares = " / ".join(f"{share:.0f}" for share in 100 * parts / parts.sum())
-            if args.no_floor:
-                bar.update(len(seeds) // 2 if mode == "all" else len(seeds) - len(seeds) // 2)
+            if args.no_floor and mode == "detecting":  # the bar counts a cell's seeds
+                bar.update(len(seeds))
 
         all_, detecting = (
             root_mean_square(tracker_rmse["all"]),
